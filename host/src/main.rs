@@ -1,0 +1,2 @@
+//! `semloc` command-line interface.
+fn main() {}
