@@ -6,7 +6,8 @@ use std::path::PathBuf;
 /// Real-data tests skip (with a message) when it is absent so a plain `cargo test` works on a
 /// fresh machine; CI sets `SEMLOC_REQUIRE_DATA=1` so that absence is a failure there.
 pub fn shared_data() -> Option<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("..").join("shared").join("data");
+    let root =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("..").join("shared").join("data");
     if root.is_dir() {
         Some(root)
     } else if std::env::var_os("SEMLOC_REQUIRE_DATA").is_some() {

@@ -1,0 +1,1 @@
+//! KITTI dataset readers (odometry and raw layouts).

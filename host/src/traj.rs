@@ -1,0 +1,1 @@
+//! Trajectory files: KITTI pose files and TUM files.
