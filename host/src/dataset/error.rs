@@ -1,0 +1,188 @@
+//! The one error type of the dataset readers: every variant names the file or folder it is
+//! about, and the line (1-based) where there is one, so a message alone says what to fix.
+
+use std::path::PathBuf;
+
+/// Why a KITTI dataset could not be read.
+///
+/// Every variant carries the path of the file (or folder) at fault; text-file variants carry
+/// the 1-based line number too. The readers never panic on bad input: they return one of these.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DatasetError {
+    /// A required file or folder does not exist.
+    #[error("{}: missing file or folder", path.display())]
+    MissingFile {
+        /// The path that was looked for.
+        path: PathBuf,
+    },
+    /// A file exists but could not be read.
+    #[error("{}: cannot read: {msg}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's reason.
+        msg: String,
+    },
+    /// A line could not be parsed.
+    #[error("{}:{line}: {msg}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong with the line.
+        msg: String,
+    },
+    /// A line holds the wrong number of numbers.
+    #[error("{}:{line}: expected {expected} numbers, found {got}", path.display())]
+    BadFieldCount {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// How many numbers the format asks for.
+        expected: usize,
+        /// How many the line holds.
+        got: usize,
+    },
+    /// A line holds NaN or an infinity.
+    #[error("{}:{line}: non-finite number (NaN or infinity)", path.display())]
+    NonFinite {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+    },
+    /// A calibration file lacks a required `key:` line.
+    #[error("{}: no `{key}:` line", path.display())]
+    MissingKey {
+        /// The calibration file.
+        path: PathBuf,
+        /// The key looked for (e.g. `P0`, `P_rect_02`, `R`).
+        key: String,
+    },
+    /// Calibration numbers parse but make no sense (zero focal length, non-positive baseline,
+    /// singular transform).
+    #[error("{}: bad calibration: {msg}", path.display())]
+    BadCalib {
+        /// The calibration file.
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// The timestamp file has fewer entries than there are images.
+    #[error("{}: {times} timestamps for {images} images", path.display())]
+    TimesTooShort {
+        /// The timestamp file.
+        path: PathBuf,
+        /// Timestamps found.
+        times: usize,
+        /// Images found.
+        images: usize,
+    },
+    /// The pose file does not have one pose per image.
+    #[error("{}: {poses} poses for {images} images", path.display())]
+    PoseCountMismatch {
+        /// The pose file.
+        path: PathBuf,
+        /// Poses found.
+        poses: usize,
+        /// Images found.
+        images: usize,
+    },
+    /// The oxts folder does not have one record per image.
+    #[error("{}: {oxts} oxts records for {images} images", dir.display())]
+    OxtsCountMismatch {
+        /// The `oxts/data` folder.
+        dir: PathBuf,
+        /// Records found.
+        oxts: usize,
+        /// Images found.
+        images: usize,
+    },
+    /// An oxts record does not hold the 30 fields of `dataformat.txt`.
+    #[error("{}: oxts record has {got} fields, expected 30", path.display())]
+    OxtsFields {
+        /// The oxts record file.
+        path: PathBuf,
+        /// Fields found.
+        got: usize,
+    },
+    /// Left and right image folders hold different numbers of images.
+    #[error(
+        "{} holds {left} images but {} holds {right}",
+        left_dir.display(),
+        right_dir.display()
+    )]
+    ImageCountMismatch {
+        /// The left camera's image folder.
+        left_dir: PathBuf,
+        /// The right camera's image folder.
+        right_dir: PathBuf,
+        /// Left images found.
+        left: usize,
+        /// Right images found.
+        right: usize,
+    },
+    /// An image is not the size of the sequence (or of its stereo partner).
+    #[error(
+        "{}: image is {}x{}, expected {}x{}",
+        path.display(),
+        got.0,
+        got.1,
+        expected.0,
+        expected.1
+    )]
+    ImageSizeMismatch {
+        /// The image file.
+        path: PathBuf,
+        /// Expected (width, height).
+        expected: (u32, u32),
+        /// Actual (width, height).
+        got: (u32, u32),
+    },
+    /// An image file could not be decoded.
+    #[error("{}: cannot decode image: {msg}", path.display())]
+    ImageDecode {
+        /// The image file.
+        path: PathBuf,
+        /// The decoder's reason.
+        msg: String,
+    },
+    /// A sequence folder holds no images.
+    #[error("{}: no images (empty sequence)", path.display())]
+    EmptySequence {
+        /// The folder that should hold images.
+        path: PathBuf,
+    },
+    /// A folder is neither a KITTI odometry nor a KITTI raw layout (or is ambiguous).
+    #[error("{}: not a KITTI dataset folder: {msg}", path.display())]
+    UnknownLayout {
+        /// The folder.
+        path: PathBuf,
+        /// What was found, or what would disambiguate.
+        msg: String,
+    },
+    /// A frame index past the end of the sequence was asked for.
+    #[error("{}: frame {index} asked for, the sequence has {frames}", path.display())]
+    FrameOutOfRange {
+        /// The sequence folder.
+        path: PathBuf,
+        /// The index asked for.
+        index: usize,
+        /// Frames in the sequence.
+        frames: usize,
+    },
+}
+
+impl DatasetError {
+    /// Maps an I/O error on `path` to `MissingFile` (not found) or `Io` (anything else).
+    pub(crate) fn io(path: &std::path::Path, e: &std::io::Error) -> Self {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            DatasetError::MissingFile { path: path.to_path_buf() }
+        } else {
+            DatasetError::Io { path: path.to_path_buf(), msg: e.to_string() }
+        }
+    }
+}
