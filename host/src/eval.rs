@@ -1,1 +1,651 @@
 //! Trajectory evaluation: KITTI devkit t_rel/r_rel and Umeyama-aligned ATE.
+//!
+//! # KITTI relative error (t_rel, r_rel)
+//! A re-implementation of `calcSequenceErrors` in the KITTI odometry devkit's
+//! `evaluate_odometry.cpp`:
+//! * cumulative distance along the **ground truth** (`trajectoryDistances`), kept in `f32` and
+//!   accumulated with the same roundings as the devkit so segment ends are chosen identically;
+//! * segment lengths 100, 200, …, 800 m, first frames every 10 frames (`step_size = 10`);
+//! * last frame = first `i >= first` with `dist[i] > dist[first] + len`
+//!   (`lastFrameFromSegmentLength`); segments with no such frame are skipped;
+//! * `E = (P_first⁻¹ P_last)⁻¹ (G_first⁻¹ G_last)` with general 4x4 inverses like the devkit's
+//!   `Matrix::inv`; `r = acos(clamp(0.5 (tr R_E − 1), −1, 1)) / len`, `t = ‖t_E‖ / len`;
+//! * the sequence figures are the means over all segments: t_rel in %, r_rel in deg/100 m.
+//!
+//! The errors themselves are computed in `f64` (the devkit rounds them to `f32`), which changes
+//! results only far below the 3 significant digits that are reported.
+//!
+//! # ATE
+//! Estimated positions are aligned to ground-truth positions with Umeyama's method
+//! ([`Align::Se3`]: rotation + translation like `evo_ape kitti -a`; [`Align::Sim3`]: also scale,
+//! like `-as`; [`Align::None`]), then the translation error of every pose is summarised as
+//! RMSE, mean, median and max (evo's APE on the translation part).
+//!
+//! Both trajectories must have the same number of poses (frame `i` of one is frame `i` of the
+//! other), as the devkit requires; otherwise [`EvalError::LengthMismatch`]. Callers that want to
+//! evaluate a prefix can slice both inputs to the shorter length themselves.
+
+use core::fmt;
+use core::str::FromStr;
+
+use nalgebra::{Matrix3, Matrix4, Vector3};
+use semloc_core::geom::Se3;
+use serde::Serialize;
+
+/// Segment lengths of the KITTI devkit in metres.
+pub const KITTI_LENGTHS: [f64; 8] = [100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0];
+/// The devkit's spacing of first frames (every 10 frames, one second at 10 Hz).
+pub const KITTI_STEP: usize = 10;
+
+/// An evaluation error.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum EvalError {
+    /// The two trajectories have different numbers of poses.
+    #[error(
+        "ground truth has {gt} poses but the estimate has {est}; they must match frame for frame"
+    )]
+    LengthMismatch {
+        /// Ground-truth pose count.
+        gt: usize,
+        /// Estimated pose count.
+        est: usize,
+    },
+    /// There are no poses.
+    #[error("empty trajectory")]
+    Empty,
+    /// The estimated positions do not span a plane, so Umeyama alignment is undefined
+    /// (the same condition on which evo refuses to align).
+    #[error("degenerate point set: Umeyama alignment needs positions spanning at least a plane")]
+    DegenerateAlignment,
+}
+
+/// How the estimate is aligned to the ground truth before the ATE.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Align {
+    /// No alignment: both trajectories are taken in their own (shared) world frame.
+    None,
+    /// Rotation and translation (Umeyama without scale), like `evo_ape -a`.
+    #[default]
+    Se3,
+    /// Rotation, translation and scale (Umeyama with scale), like `evo_ape -as`.
+    Sim3,
+}
+
+impl fmt::Display for Align {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Align::None => "none",
+            Align::Se3 => "se3",
+            Align::Sim3 => "sim3",
+        })
+    }
+}
+
+impl FromStr for Align {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "none" => Ok(Align::None),
+            "se3" => Ok(Align::Se3),
+            "sim3" => Ok(Align::Sim3),
+            _ => Err(format!("unknown alignment {s:?} (expected se3, sim3 or none)")),
+        }
+    }
+}
+
+/// A similarity transform `p ↦ scale · rot · p + trans` (the result of an alignment).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Sim3 {
+    /// Rotation matrix, row-major when serialised.
+    #[serde(serialize_with = "ser_mat3")]
+    pub rot: Matrix3<f64>,
+    /// Translation in metres.
+    #[serde(serialize_with = "ser_vec3")]
+    pub trans: Vector3<f64>,
+    /// Scale factor (1 unless aligned with [`Align::Sim3`]).
+    pub scale: f64,
+}
+
+fn ser_mat3<S: serde::Serializer>(m: &Matrix3<f64>, s: S) -> Result<S::Ok, S::Error> {
+    let rows: [[f64; 3]; 3] = core::array::from_fn(|r| core::array::from_fn(|c| m[(r, c)]));
+    rows.serialize(s)
+}
+
+fn ser_vec3<S: serde::Serializer>(v: &Vector3<f64>, s: S) -> Result<S::Ok, S::Error> {
+    [v.x, v.y, v.z].serialize(s)
+}
+
+impl Sim3 {
+    /// The identity.
+    pub fn identity() -> Self {
+        Sim3 { rot: Matrix3::identity(), trans: Vector3::zeros(), scale: 1.0 }
+    }
+
+    /// Maps a point.
+    pub fn apply_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.scale * (self.rot * p) + self.trans
+    }
+
+    /// Maps a pose (camera-to-world): rotates its orientation, maps its position.
+    pub fn apply_pose(&self, pose: &Se3) -> Se3 {
+        Se3::new(self.rot * pose.rot, self.apply_point(&pose.trans))
+    }
+}
+
+/// Umeyama's least-squares similarity: the `Sim3` minimising `Σ ‖dst_i − (s R src_i + t)‖²`
+/// (scale fixed to 1 unless `with_scale`). Uses a 3x3 SVD with the reflection fix, in `f64`.
+///
+/// Fails with [`EvalError::DegenerateAlignment`] when the cross-covariance has rank < 2
+/// (fewer than three non-collinear points), and [`EvalError::LengthMismatch`] / [`EvalError::Empty`].
+pub fn umeyama(
+    src: &[Vector3<f64>],
+    dst: &[Vector3<f64>],
+    with_scale: bool,
+) -> Result<Sim3, EvalError> {
+    if src.len() != dst.len() {
+        return Err(EvalError::LengthMismatch { gt: dst.len(), est: src.len() });
+    }
+    if src.is_empty() {
+        return Err(EvalError::Empty);
+    }
+    let n = src.len() as f64;
+    let mean_s = src.iter().sum::<Vector3<f64>>() / n;
+    let mean_d = dst.iter().sum::<Vector3<f64>>() / n;
+    let mut cov = Matrix3::zeros();
+    let mut var_s = 0.0;
+    for (s, d) in src.iter().zip(dst) {
+        let (cs, cd) = (s - mean_s, d - mean_d);
+        cov += cd * cs.transpose();
+        var_s += cs.norm_squared();
+    }
+    cov /= n;
+    var_s /= n;
+    let svd = cov.svd(true, true);
+    let (u, v_t) = match (svd.u, svd.v_t) {
+        (Some(u), Some(v_t)) => (u, v_t),
+        _ => return Err(EvalError::DegenerateAlignment),
+    };
+    let d = svd.singular_values;
+    if d.iter().filter(|&&x| x > f64::EPSILON).count() < 2 {
+        return Err(EvalError::DegenerateAlignment);
+    }
+    let mut sign = Vector3::new(1.0, 1.0, 1.0);
+    if u.determinant() * v_t.determinant() < 0.0 {
+        // Flip the direction of the smallest singular value.
+        sign[d.imin()] = -1.0;
+    }
+    let rot = u * Matrix3::from_diagonal(&sign) * v_t;
+    let scale = if with_scale { d.dot(&sign) / var_s } else { 1.0 };
+    let trans = mean_d - scale * (rot * mean_s);
+    Ok(Sim3 { rot, trans, scale })
+}
+
+/// The KITTI devkit's error record for one segment (`errors` in `evaluate_odometry.cpp`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SegmentError {
+    /// First frame of the segment.
+    pub first_frame: usize,
+    /// Last frame of the segment.
+    pub last_frame: usize,
+    /// Rotation error per metre (rad/m).
+    pub r_err: f64,
+    /// Translation error per metre (m/m).
+    pub t_err: f64,
+    /// Segment length (m).
+    pub len: f64,
+    /// Speed (m/s) as the devkit computes it: `len / (0.1 · (last − first + 1))`.
+    pub speed: f64,
+}
+
+/// Cumulative distance along a trajectory as the devkit computes it (`trajectoryDistances`):
+/// `f32` storage, each step added in `f64` then rounded.
+pub fn trajectory_distances_f32(poses: &[Se3]) -> Vec<f32> {
+    let mut dist = Vec::with_capacity(poses.len());
+    if poses.is_empty() {
+        return dist;
+    }
+    dist.push(0.0f32);
+    for w in poses.windows(2) {
+        let step = (w[0].trans - w[1].trans).norm();
+        let prev = *dist.last().unwrap_or(&0.0) as f64;
+        dist.push((prev + step) as f32);
+    }
+    dist
+}
+
+/// Cumulative distance along a trajectory in `f64` (for reporting and plots).
+pub fn trajectory_distances(poses: &[Se3]) -> Vec<f64> {
+    let mut acc = 0.0;
+    let mut out = Vec::with_capacity(poses.len());
+    for (i, p) in poses.iter().enumerate() {
+        if i > 0 {
+            acc += (p.trans - poses[i - 1].trans).norm();
+        }
+        out.push(acc);
+    }
+    out
+}
+
+/// The devkit's `lastFrameFromSegmentLength`: the first frame `i >= first` whose distance
+/// exceeds `dist[first] + len` (compared in `f32`), or `None`.
+pub fn last_frame_from_segment_length(dist: &[f32], first: usize, len: f32) -> Option<usize> {
+    let target = dist.get(first)? + len;
+    (first..dist.len()).find(|&i| dist[i] > target)
+}
+
+fn to_mat4(p: &Se3) -> Matrix4<f64> {
+    let mut m = Matrix4::identity();
+    m.fixed_view_mut::<3, 4>(0, 0).copy_from(&p.to_matrix3x4());
+    m
+}
+
+/// General 4x4 inverse like the devkit's `Matrix::inv` (falls back to the rigid inverse for a
+/// singular matrix, which a pose never is).
+fn inv4(m: &Matrix4<f64>) -> Matrix4<f64> {
+    m.try_inverse().unwrap_or_else(|| {
+        let r = m.fixed_view::<3, 3>(0, 0).transpose();
+        let t = -(r * m.fixed_view::<3, 1>(0, 3));
+        let mut out = Matrix4::identity();
+        out.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+        out.fixed_view_mut::<3, 1>(0, 3).copy_from(&t);
+        out
+    })
+}
+
+/// All devkit segment errors of one sequence (`calcSequenceErrors`).
+pub fn segment_errors(gt: &[Se3], est: &[Se3]) -> Result<Vec<SegmentError>, EvalError> {
+    check_lengths(gt, est)?;
+    let dist = trajectory_distances_f32(gt);
+    let gt4: Vec<Matrix4<f64>> = gt.iter().map(to_mat4).collect();
+    let est4: Vec<Matrix4<f64>> = est.iter().map(to_mat4).collect();
+    let mut out = Vec::new();
+    for first in (0..gt.len()).step_by(KITTI_STEP) {
+        let (gi, ei) = (inv4(&gt4[first]), inv4(&est4[first]));
+        for &len in &KITTI_LENGTHS {
+            let Some(last) = last_frame_from_segment_length(&dist, first, len as f32) else {
+                continue;
+            };
+            let delta_gt = gi * gt4[last];
+            let delta_est = ei * est4[last];
+            let e = inv4(&delta_est) * delta_gt;
+            let d = 0.5 * (e[(0, 0)] + e[(1, 1)] + e[(2, 2)] - 1.0);
+            let r_err = d.clamp(-1.0, 1.0).acos();
+            let t_err = e.fixed_view::<3, 1>(0, 3).norm();
+            let num_frames = (last - first + 1) as f64;
+            out.push(SegmentError {
+                first_frame: first,
+                last_frame: last,
+                r_err: r_err / len,
+                t_err: t_err / len,
+                len,
+                speed: len / (0.1 * num_frames),
+            });
+        }
+    }
+    Ok(out)
+}
+
+fn check_lengths(gt: &[Se3], est: &[Se3]) -> Result<(), EvalError> {
+    if gt.len() != est.len() {
+        return Err(EvalError::LengthMismatch { gt: gt.len(), est: est.len() });
+    }
+    if gt.is_empty() {
+        return Err(EvalError::Empty);
+    }
+    Ok(())
+}
+
+/// rad/m → deg/100 m.
+const RAD_PER_M_TO_DEG_PER_100M: f64 = 180.0 / core::f64::consts::PI * 100.0;
+
+/// Mean t_rel (%) and r_rel (deg/100 m) over segments; `None` when there are none.
+pub fn kitti_means(segments: &[SegmentError]) -> Option<(f64, f64)> {
+    if segments.is_empty() {
+        return None;
+    }
+    let n = segments.len() as f64;
+    let t = segments.iter().map(|s| s.t_err).sum::<f64>() / n;
+    let r = segments.iter().map(|s| s.r_err).sum::<f64>() / n;
+    Some((t * 100.0, r * RAD_PER_M_TO_DEG_PER_100M))
+}
+
+/// Devkit errors averaged over the segments of one length.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct LengthStats {
+    /// Segment length (m).
+    pub length_m: f64,
+    /// Number of segments of this length.
+    pub n_segments: usize,
+    /// Mean translation error (%).
+    pub t_rel_pct: f64,
+    /// Mean rotation error (deg/100 m).
+    pub r_rel_deg_per_100m: f64,
+}
+
+/// Per-length averages (only lengths that have at least one segment), in increasing length.
+pub fn per_length(segments: &[SegmentError]) -> Vec<LengthStats> {
+    KITTI_LENGTHS
+        .iter()
+        .filter_map(|&len| {
+            let segs: Vec<SegmentError> =
+                segments.iter().copied().filter(|s| s.len == len).collect();
+            kitti_means(&segs).map(|(t, r)| LengthStats {
+                length_m: len,
+                n_segments: segs.len(),
+                t_rel_pct: t,
+                r_rel_deg_per_100m: r,
+            })
+        })
+        .collect()
+}
+
+/// Absolute trajectory error after alignment.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Ate {
+    /// The alignment used.
+    pub align: Align,
+    /// The similarity that maps the estimate onto the ground truth.
+    pub alignment: Sim3,
+    /// Root mean square translation error (m).
+    pub rmse_m: f64,
+    /// Mean translation error (m).
+    pub mean_m: f64,
+    /// Median translation error (m) (mean of the two middle values for an even count).
+    pub median_m: f64,
+    /// Largest translation error (m).
+    pub max_m: f64,
+    /// Per-pose translation errors (m), frame order.
+    #[serde(skip)]
+    pub errors_m: Vec<f64>,
+    /// The estimate after alignment, frame order.
+    #[serde(skip)]
+    pub aligned_est: Vec<Se3>,
+}
+
+/// Aligns `est` to `gt` as `align` says and measures the translation error of every pose.
+pub fn ate(gt: &[Se3], est: &[Se3], align: Align) -> Result<Ate, EvalError> {
+    check_lengths(gt, est)?;
+    let src: Vec<Vector3<f64>> = est.iter().map(|p| p.trans).collect();
+    let dst: Vec<Vector3<f64>> = gt.iter().map(|p| p.trans).collect();
+    let alignment = match align {
+        Align::None => Sim3::identity(),
+        Align::Se3 => umeyama(&src, &dst, false)?,
+        Align::Sim3 => umeyama(&src, &dst, true)?,
+    };
+    let aligned_est: Vec<Se3> = est.iter().map(|p| alignment.apply_pose(p)).collect();
+    let errors_m: Vec<f64> =
+        aligned_est.iter().zip(gt).map(|(e, g)| (e.trans - g.trans).norm()).collect();
+    let n = errors_m.len() as f64;
+    let rmse_m = (errors_m.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+    let mean_m = errors_m.iter().sum::<f64>() / n;
+    let max_m = errors_m.iter().copied().fold(0.0, f64::max);
+    let mut sorted = errors_m.clone();
+    sorted.sort_by(f64::total_cmp);
+    let mid = sorted.len() / 2;
+    let median_m =
+        if sorted.len() % 2 == 1 { sorted[mid] } else { 0.5 * (sorted[mid - 1] + sorted[mid]) };
+    Ok(Ate { align, alignment, rmse_m, mean_m, median_m, max_m, errors_m, aligned_est })
+}
+
+/// Everything `semloc eval` reports about one estimated trajectory.
+///
+/// Serialises to JSON with the summary, the per-length table, the ATE alignment and every
+/// devkit segment; the per-frame distances and errors and the aligned trajectory are kept for
+/// plots but skipped in JSON.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EvalReport {
+    /// Number of poses in each trajectory.
+    pub n_poses: usize,
+    /// Ground-truth path length (m).
+    pub path_length_m: f64,
+    /// Number of devkit segments (0 when the path is shorter than 100 m).
+    pub n_segments: usize,
+    /// Devkit translation error (%), `None` without segments.
+    pub t_rel_pct: Option<f64>,
+    /// Devkit rotation error (deg/100 m), `None` without segments.
+    pub r_rel_deg_per_100m: Option<f64>,
+    /// Alignment mode of the ATE.
+    pub align: Align,
+    /// ATE RMSE (m).
+    pub ate_rmse_m: f64,
+    /// ATE mean (m).
+    pub ate_mean_m: f64,
+    /// ATE median (m).
+    pub ate_median_m: f64,
+    /// ATE max (m).
+    pub ate_max_m: f64,
+    /// The alignment that maps the estimate onto the ground truth.
+    pub alignment: Sim3,
+    /// Devkit errors per segment length.
+    pub per_length: Vec<LengthStats>,
+    /// Every devkit segment.
+    pub segments: Vec<SegmentError>,
+    /// Cumulative ground-truth distance at every frame (m), for plots.
+    #[serde(skip)]
+    pub gt_distances_m: Vec<f64>,
+    /// ATE translation error at every frame (m).
+    #[serde(skip)]
+    pub ate_errors_m: Vec<f64>,
+    /// The estimate after alignment (same frame as the ground truth).
+    #[serde(skip)]
+    pub aligned_est: Vec<Se3>,
+}
+
+/// Evaluates `est` against `gt` (same length, frame for frame): devkit t_rel/r_rel and the ATE
+/// after `align`.
+pub fn evaluate(gt: &[Se3], est: &[Se3], align: Align) -> Result<EvalReport, EvalError> {
+    let segments = segment_errors(gt, est)?;
+    let a = ate(gt, est, align)?;
+    let gt_distances_m = trajectory_distances(gt);
+    let means = kitti_means(&segments);
+    Ok(EvalReport {
+        n_poses: gt.len(),
+        path_length_m: gt_distances_m.last().copied().unwrap_or(0.0),
+        n_segments: segments.len(),
+        t_rel_pct: means.map(|m| m.0),
+        r_rel_deg_per_100m: means.map(|m| m.1),
+        align,
+        ate_rmse_m: a.rmse_m,
+        ate_mean_m: a.mean_m,
+        ate_median_m: a.median_m,
+        ate_max_m: a.max_m,
+        alignment: a.alignment,
+        per_length: per_length(&segments),
+        segments,
+        gt_distances_m,
+        ate_errors_m: a.errors_m,
+        aligned_est: a.aligned_est,
+    })
+}
+
+impl fmt::Display for EvalReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "poses          {}", self.n_poses)?;
+        writeln!(f, "path length    {:.1} m", self.path_length_m)?;
+        writeln!(
+            f,
+            "segments       {} (100..800 m, first frame every {KITTI_STEP})",
+            self.n_segments
+        )?;
+        match (self.t_rel_pct, self.r_rel_deg_per_100m) {
+            (Some(t), Some(r)) => {
+                writeln!(f, "t_rel          {t:.3} %")?;
+                writeln!(f, "r_rel          {r:.3} deg/100 m")?;
+            }
+            _ => {
+                writeln!(f, "t_rel          n/a (ground-truth path shorter than 100 m)")?;
+                writeln!(f, "r_rel          n/a")?;
+            }
+        }
+        writeln!(
+            f,
+            "ATE ({})     rmse {:.3} m, mean {:.3} m, median {:.3} m, max {:.3} m",
+            match self.align {
+                Align::None => "none",
+                Align::Se3 => "se3 ",
+                Align::Sim3 => "sim3",
+            },
+            self.ate_rmse_m,
+            self.ate_mean_m,
+            self.ate_median_m,
+            self.ate_max_m
+        )?;
+        if self.align == Align::Sim3 {
+            writeln!(f, "scale          {:.4}", self.alignment.scale)?;
+        }
+        if !self.per_length.is_empty() {
+            writeln!(f)?;
+            writeln!(f, "length [m]  segments  t_rel [%]  r_rel [deg/100 m]")?;
+            for row in &self.per_length {
+                writeln!(
+                    f,
+                    "{:>10.0}  {:>8}  {:>9.3}  {:>17.3}",
+                    row.length_m, row.n_segments, row.t_rel_pct, row.r_rel_deg_per_100m
+                )?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    /// A smooth synthetic drive: ~1 m per frame along a wide arc (radius 5 km), slightly hilly.
+    fn drive(n: usize) -> Vec<Se3> {
+        (0..n)
+            .map(|i| {
+                let s = i as f64;
+                let yaw = s / 5000.0;
+                let rot = Rotation3::from_euler_angles(0.0, yaw, 0.0).into_inner();
+                let trans = Vector3::new(
+                    5000.0 * (1.0 - yaw.cos()),
+                    0.5 * (0.01 * s).sin(),
+                    5000.0 * yaw.sin(),
+                );
+                Se3::new(rot, trans)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn perfect_estimate_has_zero_error() {
+        let gt = drive(1200);
+        let r = evaluate(&gt, &gt, Align::Se3).unwrap();
+        assert!(r.n_segments > 0);
+        assert!(r.t_rel_pct.unwrap() < 1e-9);
+        assert!(r.r_rel_deg_per_100m.unwrap() < 1e-5);
+        assert!(r.ate_rmse_m < 1e-6);
+        assert_eq!(r.per_length.len(), 8);
+    }
+
+    #[test]
+    fn constant_scale_error_gives_t_rel_of_the_scale() {
+        let gt = drive(1200);
+        let est: Vec<Se3> = gt.iter().map(|p| Se3::new(p.rot, p.trans * 1.01)).collect();
+        let r = evaluate(&gt, &est, Align::Se3).unwrap();
+        // E = (P_i⁻¹P_j)⁻¹ G_i⁻¹G_j has translation −0.01 · R_Δᵀ t_Δ, so ‖t_E‖/len = 0.01 · chord/len;
+        // on this wide arc the chord is within 0.2 % of the arc, and segments overshoot len by < 1 m.
+        let t = r.t_rel_pct.unwrap();
+        assert!((t - 1.0).abs() < 0.01, "t_rel {t}");
+        assert!(r.r_rel_deg_per_100m.unwrap() < 1e-5);
+        // Sim(3) alignment recovers the scale exactly and leaves no error.
+        let s = evaluate(&gt, &est, Align::Sim3).unwrap();
+        assert!((s.alignment.scale - 1.0 / 1.01).abs() < 1e-12);
+        assert!(s.ate_rmse_m < 1e-6);
+        assert!(r.ate_rmse_m > 1.0);
+    }
+
+    #[test]
+    fn rigidly_moved_estimate_ate_se3_zero_none_not() {
+        let gt = drive(500);
+        let t = Se3::new(
+            Rotation3::from_euler_angles(0.3, -1.0, 2.0).into_inner(),
+            Vector3::new(10.0, -5.0, 100.0),
+        );
+        let est: Vec<Se3> = gt.iter().map(|p| t.compose(p)).collect();
+        let se3 = evaluate(&gt, &est, Align::Se3).unwrap();
+        assert!(se3.ate_rmse_m < 1e-6, "{}", se3.ate_rmse_m);
+        let rot_err = (se3.alignment.rot - t.rot.transpose()).abs().max();
+        assert!(rot_err < 1e-7, "{rot_err}");
+        let none = evaluate(&gt, &est, Align::None).unwrap();
+        assert!(none.ate_rmse_m > 10.0);
+        // Relative errors do not depend on the world frame.
+        assert!(se3.t_rel_pct.unwrap() < 1e-9 && none.t_rel_pct.unwrap() < 1e-9);
+        for p in &se3.aligned_est {
+            assert!((p.rot.determinant() - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn umeyama_recovers_similarity_and_avoids_reflection() {
+        let src: Vec<Vector3<f64>> = (0..20)
+            .map(|i| {
+                let s = i as f64;
+                Vector3::new(s.sin() * 3.0, (0.7 * s).cos(), 0.1 * s * s)
+            })
+            .collect();
+        let rot = Rotation3::from_euler_angles(1.0, 0.5, -2.0).into_inner();
+        let t = Vector3::new(1.0, 2.0, 3.0);
+        let dst: Vec<Vector3<f64>> = src.iter().map(|p| 2.5 * (rot * p) + t).collect();
+        let sim = umeyama(&src, &dst, true).unwrap();
+        assert!((sim.scale - 2.5).abs() < 1e-12);
+        assert!((sim.rot - rot).abs().max() < 1e-12);
+        assert!((sim.trans - t).norm() < 1e-10);
+        // A mirrored target: the best proper rotation, never a reflection.
+        let mirrored: Vec<Vector3<f64>> =
+            src.iter().map(|p| Vector3::new(p.x, p.y, -p.z)).collect();
+        let r = umeyama(&src, &mirrored, false).unwrap();
+        assert!((r.rot.determinant() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn degenerate_inputs_are_errors_not_panics() {
+        let p = vec![Vector3::new(1.0, 2.0, 3.0); 5];
+        assert_eq!(umeyama(&p, &p, false), Err(EvalError::DegenerateAlignment));
+        let line: Vec<Vector3<f64>> = (0..5).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
+        assert_eq!(umeyama(&line, &line, true), Err(EvalError::DegenerateAlignment));
+        assert_eq!(umeyama(&[], &[], true), Err(EvalError::Empty));
+        let gt = drive(10);
+        assert_eq!(
+            evaluate(&gt, &gt[..9], Align::Se3).unwrap_err(),
+            EvalError::LengthMismatch { gt: 10, est: 9 }
+        );
+        assert_eq!(evaluate(&[], &[], Align::None).unwrap_err(), EvalError::Empty);
+        // Short path: no devkit segments, but an ATE.
+        let r = evaluate(&gt, &gt, Align::None).unwrap();
+        assert_eq!((r.n_segments, r.t_rel_pct), (0, None));
+        assert!(r.to_string().contains("n/a"));
+        let one = evaluate(&gt[..1], &gt[..1], Align::None).unwrap();
+        assert_eq!(one.ate_rmse_m, 0.0);
+    }
+
+    #[test]
+    fn last_frame_matches_devkit_rule() {
+        let dist = [0.0f32, 50.0, 100.0, 100.5, 250.0];
+        // Strictly greater than dist[first] + len.
+        assert_eq!(last_frame_from_segment_length(&dist, 0, 100.0), Some(3));
+        assert_eq!(last_frame_from_segment_length(&dist, 1, 100.0), Some(4));
+        assert_eq!(last_frame_from_segment_length(&dist, 2, 200.0), None);
+        assert_eq!(last_frame_from_segment_length(&dist, 9, 100.0), None);
+    }
+
+    #[test]
+    fn report_serialises_and_displays() {
+        let gt = drive(900);
+        let r = evaluate(&gt, &gt, Align::Sim3).unwrap();
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["align"], "sim3");
+        assert_eq!(json["n_poses"], 900);
+        assert!(json["per_length"].as_array().unwrap().len() >= 7);
+        assert!(json.get("aligned_est").is_none());
+        assert_eq!(json["segments"].as_array().unwrap().len(), r.n_segments);
+        let text = r.to_string();
+        assert!(text.contains("t_rel") && text.contains("length [m]"), "{text}");
+        assert_eq!("SIM3".parse::<Align>().unwrap(), Align::Sim3);
+        assert!("x".parse::<Align>().is_err());
+    }
+}
