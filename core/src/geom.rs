@@ -251,6 +251,12 @@ impl Default for Se3 {
 }
 
 impl Se3 {
+    /// The identity transform, as a constant (for `const` initialisers of fixed storage).
+    pub const IDENTITY: Se3 = Se3 {
+        rot: Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        trans: Vector3::new(0.0, 0.0, 0.0),
+    };
+
     /// The identity transform.
     pub fn identity() -> Self {
         Self { rot: Matrix3::identity(), trans: Vector3::zeros() }

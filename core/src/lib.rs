@@ -8,7 +8,15 @@
 //!   every target).
 //! - [`geom`]: SE(3) (exp/log, compose, inverse), the pinhole stereo camera and projection
 //!   Jacobians.
+//! - [`frame`]: the tracker's input, one stereo frame's features.
+//! - [`optim`]: motion-only pose optimisation and sliding-window bundle adjustment.
+//! - [`map`]: the bounded window of keyframes and landmarks.
+//! - [`tracker`]: the per-frame stereo tracker, core's SLAM entry point.
 #![cfg_attr(not(test), no_std)]
 
+pub mod frame;
 pub mod geom;
+pub mod map;
 pub mod math;
+pub mod optim;
+pub mod tracker;
