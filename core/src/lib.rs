@@ -12,11 +12,16 @@
 //! - [`optim`]: motion-only pose optimisation and sliding-window bundle adjustment.
 //! - [`map`]: the bounded window of keyframes and landmarks.
 //! - [`tracker`]: the per-frame stereo tracker, core's SLAM entry point.
+//! - [`image`]: luma image views and buffers, bilinear resize, 7×7 Gaussian blur.
+//! - [`orb`]: ORB extraction as ORB-SLAM2's `ORBextractor`, in fixed memory, with a
+//!   semantic weight hook.
 #![cfg_attr(not(test), no_std)]
 
 pub mod frame;
 pub mod geom;
+pub mod image;
 pub mod map;
 pub mod math;
 pub mod optim;
+pub mod orb;
 pub mod tracker;

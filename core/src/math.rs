@@ -64,3 +64,13 @@ pub fn exp(x: f64) -> f64 {
 pub fn ln(x: f64) -> f64 {
     libm::log(x)
 }
+/// Sine (f32).
+#[inline]
+pub fn sinf(x: f32) -> f32 {
+    libm::sinf(x)
+}
+/// Cosine (f32).
+#[inline]
+pub fn cosf(x: f32) -> f32 {
+    libm::cosf(x)
+}

@@ -1,0 +1,410 @@
+//! FAST-9 corner detection (Rosten & Drummond), with OpenCV's score and non-maximum suppression.
+//!
+//! A pixel `p` is a corner at threshold `t` when 9 contiguous pixels of the 16-pixel Bresenham
+//! circle of radius 3 are all brighter than `p + t` or all darker than `p − t`. Its **score** is
+//! the largest `t` for which it is still a corner (OpenCV's `cornerScore`), so
+//! `score ≥ t ⇔ corner at t`: one score map serves both of ORB-SLAM2's thresholds (`iniThFAST`
+//! and the `minThFAST` fallback). Non-maximum suppression keeps a corner whose score is strictly
+//! greater than all 8 neighbours' (non-corners score 0), as OpenCV's `FAST(.., true)`.
+//!
+//! Speed: a row is screened with a vectorised necessary condition (for one polarity, every
+//! antipodal pair of circle pixels must contain a pixel of that polarity, since any 9-arc covers
+//! one of each pair); only survivors get the exact scalar test and score.
+//!
+//! Memory: the caller provides the score map (one byte per pixel) and a row of flags.
+
+use crate::image::{ImageView, ImageViewMut};
+
+/// Circle radius; detection needs this many pixels of margin on every side.
+pub const FAST_RADIUS: usize = 3;
+
+/// The 16 circle offsets `(dx, dy)` in circular order (OpenCV's `offsets16`).
+pub const CIRCLE: [(i32, i32); 16] = [
+    (0, 3),
+    (1, 3),
+    (2, 2),
+    (3, 1),
+    (3, 0),
+    (3, -1),
+    (2, -2),
+    (1, -3),
+    (0, -3),
+    (-1, -3),
+    (-2, -2),
+    (-3, -1),
+    (-3, 0),
+    (-3, 1),
+    (-2, 2),
+    (-1, 3),
+];
+
+/// True when the 16-bit circular mask `m` has 9 contiguous set bits.
+#[inline]
+fn has_arc9(m: u32) -> bool {
+    let x = m | (m << 16);
+    let mut a = x & (x >> 1); // runs of 2
+    a &= a >> 2; // 4
+    a &= a >> 4; // 8
+    a &= x >> 8; // 9
+    a & 0xFFFF != 0
+}
+
+/// Largest `max over 9-arcs of (min over the arc of v)` for the circular sequence `v`.
+#[inline]
+fn best_arc_min(v: &[i16; 16]) -> i16 {
+    let mut e = [0i16; 25];
+    for (i, x) in e.iter_mut().enumerate() {
+        *x = v[i & 15];
+    }
+    let mut m2 = [0i16; 24];
+    for i in 0..24 {
+        m2[i] = e[i].min(e[i + 1]);
+    }
+    let mut m4 = [0i16; 22];
+    for i in 0..22 {
+        m4[i] = m2[i].min(m2[i + 2]);
+    }
+    let mut best = i16::MIN;
+    for i in 0..16 {
+        best = best.max(m4[i].min(m4[i + 4]).min(e[i + 8]));
+    }
+    best
+}
+
+/// FAST score of the pixel at `idx` of `data` given the 16 circle offsets (in bytes), or 0 when it
+/// is not a corner at threshold `t` (`t >= 1`).
+#[inline]
+fn score_at(data: &[u8], idx: usize, offs: &[isize; 16], t: i16) -> u8 {
+    let p = i16::from(data[idx]);
+    let mut d = [0i16; 16];
+    let (mut bright, mut dark) = (0u32, 0u32);
+    for k in 0..16 {
+        let v = i16::from(data[(idx as isize + offs[k]) as usize]) - p;
+        d[k] = v;
+        bright |= u32::from(v > t) << k;
+        dark |= u32::from(v < -t) << k;
+    }
+    // Only a polarity with a 9-arc above `t` can hold the maximum, so score just that one.
+    let s = if has_arc9(bright) {
+        let b = best_arc_min(&d);
+        if has_arc9(dark) {
+            b.max(best_arc_min(&d.map(|v| -v)))
+        } else {
+            b
+        }
+    } else if has_arc9(dark) {
+        best_arc_min(&d.map(|v| -v))
+    } else {
+        return 0;
+    } - 1;
+    // s >= t >= 1 for a corner; clamp for the (impossible) rest so 0 keeps meaning "none".
+    s.clamp(1, 255) as u8
+}
+
+/// FAST score of pixel `(x, y)` (0 when not a corner even at threshold 1): the reference the
+/// row kernel is tested against.
+///
+/// # Panics
+/// If the pixel is closer than [`FAST_RADIUS`] to the border.
+pub fn corner_score(img: &ImageView<'_>, x: usize, y: usize) -> u8 {
+    assert!(x >= FAST_RADIUS && y >= FAST_RADIUS);
+    assert!(x + FAST_RADIUS < img.width() && y + FAST_RADIUS < img.height());
+    let offs = circle_offsets(img.stride());
+    score_at(img.data(), y * img.stride() + x, &offs, 1)
+}
+
+fn circle_offsets(stride: usize) -> [isize; 16] {
+    let mut o = [0isize; 16];
+    for (k, &(dx, dy)) in CIRCLE.iter().enumerate() {
+        o[k] = dy as isize * stride as isize + dx as isize;
+    }
+    o
+}
+
+/// Scores row `y` of `img` for `x in xs` at threshold `t` into `scores` (same geometry,
+/// only corners written), calls `on_corner(x)` for each corner, and returns how many it found.
+///
+/// `flags` is scratch of at least `xs.len()` bytes. Pixels must be at least [`FAST_RADIUS`] from
+/// the border.
+pub fn score_row(
+    img: &ImageView<'_>,
+    y: usize,
+    xs: core::ops::Range<usize>,
+    t: u8,
+    flags: &mut [u8],
+    scores: &mut ImageViewMut<'_>,
+    mut on_corner: impl FnMut(usize),
+) -> usize {
+    let (x0, x1) = (xs.start, xs.end);
+    if x1 <= x0 {
+        return 0;
+    }
+    debug_assert!(x0 >= FAST_RADIUS && x1 + FAST_RADIUS <= img.width());
+    debug_assert!(y >= FAST_RADIUS && y + FAST_RADIUS < img.height());
+    let n = x1 - x0;
+    let flags = &mut flags[..n];
+    screen_row(img, y, x0, n, t, flags);
+    let offs = circle_offsets(img.stride());
+    let data = img.data();
+    let base = y * img.stride() + x0;
+    let out = &mut scores.row_mut(y)[x0..x1];
+    let mut found = 0;
+    let mut i = 0;
+    while i < n {
+        if i + 8 <= n {
+            let w = &flags[i..i + 8];
+            if u64::from_ne_bytes([w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]]) == 0 {
+                i += 8;
+                continue;
+            }
+        }
+        if flags[i] != 0 {
+            let s = score_at(data, base + i, &offs, i16::from(t));
+            if s != 0 {
+                out[i] = s;
+                found += 1;
+                on_corner(x0 + i);
+            }
+        }
+        i += 1;
+    }
+    found
+}
+
+/// Vectorised necessary condition for a FAST-9 corner: writes 1 into `flags[i]` when pixel
+/// `x0 + i` may be a corner at threshold `t`.
+fn screen_row(img: &ImageView<'_>, y: usize, x0: usize, n: usize, t: u8, flags: &mut [u8]) {
+    let row = |dy: i32, dx: i32| -> &[u8] {
+        let r = img.row((y as i32 + dy) as usize);
+        let s = (x0 as i32 + dx) as usize;
+        &r[s..s + n]
+    };
+    let p = |k: usize| row(CIRCLE[k].1, CIRCLE[k].0);
+    // Sixteen named slices of exactly `n` bytes: the bounds checks hoist out of the loop and it
+    // vectorises (an array of slices would keep a check per access).
+    let c = row(0, 0);
+    let (p0, p1, p2, p3, p4, p5, p6, p7) = (p(0), p(1), p(2), p(3), p(4), p(5), p(6), p(7));
+    let (p8, p9, p10, p11, p12, p13, p14, p15) =
+        (p(8), p(9), p(10), p(11), p(12), p(13), p(14), p(15));
+    let flags = &mut flags[..n];
+    for i in 0..n {
+        let v = c[i];
+        let hi = v.saturating_add(t);
+        let lo = v.saturating_sub(t);
+        let b = |a: u8, o: u8| u8::from(a > hi) | u8::from(o > hi);
+        let d = |a: u8, o: u8| u8::from(a < lo) | u8::from(o < lo);
+        let bright = b(p0[i], p8[i])
+            & b(p1[i], p9[i])
+            & b(p2[i], p10[i])
+            & b(p3[i], p11[i])
+            & b(p4[i], p12[i])
+            & b(p5[i], p13[i])
+            & b(p6[i], p14[i])
+            & b(p7[i], p15[i]);
+        let dark = d(p0[i], p8[i])
+            & d(p1[i], p9[i])
+            & d(p2[i], p10[i])
+            & d(p3[i], p11[i])
+            & d(p4[i], p12[i])
+            & d(p5[i], p13[i])
+            & d(p6[i], p14[i])
+            & d(p7[i], p15[i]);
+        // A 9-arc also covers two neighbouring points of the compass {0, 4, 8, 12}.
+        let q = |a: u8, b: u8, c: u8, d: u8| (a & b) | (b & c) | (c & d) | (d & a);
+        let (b0, b4, b8, b12) = (
+            u8::from(p0[i] > hi),
+            u8::from(p4[i] > hi),
+            u8::from(p8[i] > hi),
+            u8::from(p12[i] > hi),
+        );
+        let (d0, d4, d8, d12) = (
+            u8::from(p0[i] < lo),
+            u8::from(p4[i] < lo),
+            u8::from(p8[i] < lo),
+            u8::from(p12[i] < lo),
+        );
+        flags[i] = (bright & q(b0, b4, b8, b12)) | (dark & q(d0, d4, d8, d12));
+    }
+}
+
+/// Calls `f(x, y, score)` for every non-maximum-suppressed corner of `scores` with `y in
+/// y0..y1`, `x in x0..x1`, in raster order. Scores outside the region must be 0 (or be real
+/// scores: they take part in the comparison); the region must keep one pixel of margin.
+pub fn for_each_nms_max(
+    scores: &ImageView<'_>,
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+    mut f: impl FnMut(usize, usize, u8),
+) {
+    debug_assert!(x0 >= 1 && y0 >= 1 && x1 < scores.width() && y1 < scores.height());
+    const CHUNK: usize = 64;
+    for y in y0..y1 {
+        let (up, cur, dn) = (scores.row(y - 1), scores.row(y), scores.row(y + 1));
+        let mut x = x0;
+        while x < x1 {
+            let n = (x1 - x).min(CHUNK);
+            if cur[x..x + n].iter().fold(0u8, |a, &v| a | v) == 0 {
+                x += n;
+                continue;
+            }
+            // Vectorised: keep[i] = score > max of the 8 neighbours (a non-corner scores 0, so
+            // it is never kept).
+            let mut keep = [0u8; CHUNK];
+            let (u0, u1, u2) = (&up[x - 1..x - 1 + n], &up[x..x + n], &up[x + 1..x + 1 + n]);
+            let (c0, c1, c2) = (&cur[x - 1..x - 1 + n], &cur[x..x + n], &cur[x + 1..x + 1 + n]);
+            let (d0, d1, d2) = (&dn[x - 1..x - 1 + n], &dn[x..x + n], &dn[x + 1..x + 1 + n]);
+            for (i, k) in keep[..n].iter_mut().enumerate() {
+                let m = u0[i]
+                    .max(u1[i])
+                    .max(u2[i])
+                    .max(c0[i])
+                    .max(c2[i])
+                    .max(d0[i])
+                    .max(d1[i])
+                    .max(d2[i]);
+                *k = u8::from(c1[i] > m);
+            }
+            for (w, word) in keep.chunks_exact(8).enumerate() {
+                if u64::from_ne_bytes([
+                    word[0], word[1], word[2], word[3], word[4], word[5], word[6], word[7],
+                ]) == 0
+                {
+                    continue;
+                }
+                for (j, &k) in word.iter().enumerate() {
+                    if k != 0 {
+                        let i = w * 8 + j;
+                        f(x + i, y, c1[i]);
+                    }
+                }
+            }
+            x += n;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Straightforward FAST-9 score from the definition, for cross-checking.
+    fn naive_score(img: &[u8], w: usize, x: usize, y: usize) -> u8 {
+        let p = img[y * w + x] as i32;
+        let v: Vec<i32> = CIRCLE
+            .iter()
+            .map(|&(dx, dy)| img[(y as i32 + dy) as usize * w + (x as i32 + dx) as usize] as i32)
+            .collect();
+        let mut best = 0;
+        for t in 1..=255 {
+            let corner = (0..16).any(|s| {
+                (0..9).all(|j| v[(s + j) % 16] > p + t) || (0..9).all(|j| v[(s + j) % 16] < p - t)
+            });
+            if corner {
+                best = t;
+            } else {
+                break;
+            }
+        }
+        best as u8
+    }
+
+    fn noise(w: usize, h: usize, seed: u32) -> Vec<u8> {
+        let mut s = seed;
+        (0..w * h)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 17;
+                s ^= s << 5;
+                (s >> 24) as u8
+            })
+            .collect()
+    }
+
+    #[test]
+    fn row_scores_match_definition() {
+        let (w, h) = (40usize, 12usize);
+        let img = noise(w, h, 0x1234_5678);
+        let view = ImageView::from_slice(&img, w, h).unwrap();
+        for t in [1u8, 7, 20, 40] {
+            let mut sc = vec![0u8; w * h];
+            let mut flags = vec![0u8; w];
+            for y in 3..h - 3 {
+                let mut sm = ImageViewMut::from_slice(&mut sc, w, h).unwrap();
+                score_row(&view, y, 3..w - 3, t, &mut flags, &mut sm, |_| {});
+            }
+            for y in 3..h - 3 {
+                for x in 3..w - 3 {
+                    let n = naive_score(&img, w, x, y);
+                    let expect = if n >= t { n } else { 0 };
+                    assert_eq!(sc[y * w + x], expect, "t={t} ({x},{y})");
+                    assert_eq!(corner_score(&view, x, y), n);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn flat_image_has_no_corners() {
+        let (w, h) = (32usize, 32usize);
+        let img = vec![128u8; w * h];
+        let view = ImageView::from_slice(&img, w, h).unwrap();
+        let mut sc = vec![0u8; w * h];
+        let mut flags = vec![0u8; w];
+        let mut n = 0;
+        for y in 3..h - 3 {
+            let mut sm = ImageViewMut::from_slice(&mut sc, w, h).unwrap();
+            n += score_row(&view, y, 3..w - 3, 1, &mut flags, &mut sm, |_| {});
+        }
+        assert_eq!(n, 0);
+        assert!(sc.iter().all(|&s| s == 0));
+    }
+
+    #[test]
+    fn bright_square_corners_are_found_at_its_corners() {
+        let (w, h) = (64usize, 64usize);
+        // Small noise breaks the exact score ties a perfect synthetic corner has (strict
+        // suppression would drop all of them, in OpenCV as here); it is far below t = 20.
+        let mut img: Vec<u8> = noise(w, h, 42).iter().map(|&n| 40 + n % 5).collect();
+        for y in 20..44 {
+            for x in 20..44 {
+                img[y * w + x] += 160;
+            }
+        }
+        let view = ImageView::from_slice(&img, w, h).unwrap();
+        let mut sc = vec![0u8; w * h];
+        let mut flags = vec![0u8; w];
+        for y in 3..h - 3 {
+            let mut sm = ImageViewMut::from_slice(&mut sc, w, h).unwrap();
+            score_row(&view, y, 3..w - 3, 20, &mut flags, &mut sm, |_| {});
+        }
+        let sv = ImageView::from_slice(&sc, w, h).unwrap();
+        let mut found = Vec::new();
+        for_each_nms_max(&sv, 4, w - 4, 4, h - 4, |x, y, s| found.push((x, y, s)));
+        let corners = [(20, 20), (43, 20), (20, 43), (43, 43)];
+        assert!(!found.is_empty());
+        for &(x, y, _) in &found {
+            let near = corners
+                .iter()
+                .any(|&(cx, cy)| (x as i32 - cx).abs() <= 2 && (y as i32 - cy).abs() <= 2);
+            assert!(near, "corner at ({x},{y}) is not near a square corner");
+        }
+        for &(cx, cy) in &corners {
+            assert!(
+                found
+                    .iter()
+                    .any(|&(x, y, _)| (x as i32 - cx).abs() <= 2 && (y as i32 - cy).abs() <= 2),
+                "no corner near ({cx},{cy})"
+            );
+        }
+    }
+
+    #[test]
+    fn arc_mask() {
+        assert!(has_arc9(0x01FF));
+        assert!(has_arc9(0xF80F)); // wraps: bits 11..15 and 0..3
+        assert!(!has_arc9(0x00FF));
+        assert!(!has_arc9(0x7F7F));
+    }
+}

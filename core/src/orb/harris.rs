@@ -1,0 +1,122 @@
+//! Harris corner response at a pixel, as OpenCV's ORB `HarrisResponses` computes it.
+//!
+//! Over a 7 × 7 block centred on the pixel, with 3 × 3 Sobel derivatives `Ix`, `Iy`:
+//! `a = ΣIx²`, `b = ΣIy²`, `c = ΣIxIy`, `R = (ab − c² − k(a + b)²)·s⁴` with `k = 0.04` and
+//! `s = 1 / (4 · 7 · 255)` (the normalisation OpenCV uses, so responses are comparable to
+//! OpenCV's). Positive on corners, negative on edges, near zero on flat patches.
+//!
+//! The sums are integers and `k = 1/25`, so `25R/s⁴ = 25(ab − c²) − (a + b)²` is computed exactly in
+//! `i64`; only the final scaling is floating point. Ranking is therefore exact and identical on
+//! every target. Memory: none beyond the stack frame.
+
+use crate::image::ImageView;
+
+/// Side of the summation block (OpenCV ORB's default `blockSize`).
+pub const HARRIS_BLOCK_SIZE: usize = 7;
+/// Harris `k`.
+pub const HARRIS_K: f32 = 0.04;
+/// Pixels of margin [`harris_response`] needs on every side (block radius + Sobel radius).
+pub const HARRIS_MARGIN: usize = HARRIS_BLOCK_SIZE / 2 + 1;
+
+/// `s⁴ / 25` with `s = 1/(4·7·255)`: maps the exact integer `25(ab − c²) − (a + b)²` to OpenCV's
+/// response scale.
+const RESPONSE_SCALE: f64 = {
+    let s = 1.0 / (4.0 * HARRIS_BLOCK_SIZE as f64 * 255.0);
+    s * s * s * s / 25.0
+};
+
+/// Exact integer Harris numerator `25(ab − c²) − (a + b)²` at `(x, y)`.
+///
+/// # Panics
+/// If the pixel is closer than [`HARRIS_MARGIN`] to the border.
+pub fn harris_numerator(img: &ImageView<'_>, x: usize, y: usize) -> i64 {
+    let r = HARRIS_BLOCK_SIZE / 2;
+    assert!(x >= HARRIS_MARGIN && y >= HARRIS_MARGIN);
+    assert!(x + HARRIS_MARGIN < img.width() && y + HARRIS_MARGIN < img.height());
+    let (mut a, mut b, mut c) = (0i32, 0i32, 0i32);
+    let xs = x - r - 1; // first column any Sobel tap touches
+    const N: usize = HARRIS_BLOCK_SIZE + 2;
+    let row = |yy: usize| -> [i32; N] {
+        let s = &img.row(yy)[xs..xs + N];
+        core::array::from_fn(|k| i32::from(s[k]))
+    };
+    // Fixed-size rows: the 7-wide inner loop unrolls and vectorises.
+    let (mut up, mut mid) = (row(y - r - 1), row(y - r));
+    for yy in y - r..=y + r {
+        let dn = row(yy + 1);
+        for j in 1..=HARRIS_BLOCK_SIZE {
+            let ix =
+                (mid[j + 1] - mid[j - 1]) * 2 + (up[j + 1] - up[j - 1]) + (dn[j + 1] - dn[j - 1]);
+            let iy = (dn[j] - up[j]) * 2 + (dn[j - 1] - up[j - 1]) + (dn[j + 1] - up[j + 1]);
+            a += ix * ix;
+            b += iy * iy;
+            c += ix * iy;
+        }
+        up = mid;
+        mid = dn;
+    }
+    let (a, b, c) = (i64::from(a), i64::from(b), i64::from(c));
+    25 * (a * b - c * c) - (a + b) * (a + b)
+}
+
+/// Harris response at `(x, y)` on OpenCV ORB's scale.
+///
+/// # Panics
+/// If the pixel is closer than [`HARRIS_MARGIN`] to the border.
+pub fn harris_response(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
+    (harris_numerator(img, x, y) as f64 * RESPONSE_SCALE) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> u8) -> Vec<u8> {
+        (0..w * h).map(|i| f(i % w, i / w)).collect()
+    }
+
+    #[test]
+    fn corner_positive_edge_negative_flat_zero() {
+        let (w, h) = (32usize, 32usize);
+        let corner = image(w, h, |x, y| if x >= 16 && y >= 16 { 220 } else { 30 });
+        let edge = image(w, h, |x, _| if x >= 16 { 220 } else { 30 });
+        let flat = image(w, h, |_, _| 90);
+        let cv = ImageView::from_slice(&corner, w, h).unwrap();
+        let ev = ImageView::from_slice(&edge, w, h).unwrap();
+        let fv = ImageView::from_slice(&flat, w, h).unwrap();
+        let rc = harris_response(&cv, 16, 16);
+        let re = harris_response(&ev, 16, 10);
+        assert!(rc > 0.0, "corner response {rc}");
+        assert!(re < 0.0, "edge response {re}");
+        assert_eq!(harris_response(&fv, 16, 16), 0.0);
+    }
+
+    #[test]
+    fn matches_float_formula() {
+        let (w, h) = (20usize, 20usize);
+        let img = image(w, h, |x, y| ((x * 31 + y * 17 + x * y) % 256) as u8);
+        let v = ImageView::from_slice(&img, w, h).unwrap();
+        let (x, y) = (9usize, 10usize);
+        let (mut a, mut b, mut c) = (0f64, 0f64, 0f64);
+        let p = |x: usize, y: usize| img[y * w + x] as f64;
+        for yy in y - 3..=y + 3 {
+            for xx in x - 3..=x + 3 {
+                let ix = (p(xx + 1, yy) - p(xx - 1, yy)) * 2.0 + p(xx + 1, yy - 1)
+                    - p(xx - 1, yy - 1)
+                    + p(xx + 1, yy + 1)
+                    - p(xx - 1, yy + 1);
+                let iy = (p(xx, yy + 1) - p(xx, yy - 1)) * 2.0 + p(xx - 1, yy + 1)
+                    - p(xx - 1, yy - 1)
+                    + p(xx + 1, yy + 1)
+                    - p(xx + 1, yy - 1);
+                a += ix * ix;
+                b += iy * iy;
+                c += ix * iy;
+            }
+        }
+        let s = 1.0 / (4.0 * 7.0 * 255.0);
+        let r = (a * b - c * c - 0.04 * (a + b) * (a + b)) * s * s * s * s;
+        let got = harris_response(&v, x, y) as f64;
+        assert!((got - r).abs() <= 1e-6 * r.abs().max(1e-12), "{got} vs {r}");
+    }
+}
