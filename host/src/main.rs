@@ -1,2 +1,44 @@
-//! `semloc` command-line interface.
-fn main() {}
+//! `semloc` command-line interface: see `semloc --help`.
+//!
+//! Each subcommand lives in its own module under `cli/`; this file only parses arguments,
+//! dispatches, and turns errors into a message naming the file and problem plus exit code 1
+//! (clap uses 2 for usage errors).
+
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+/// semloc — semantic visual localisation for automotive ECUs.
+///
+/// Stereo SLAM with semantic ORB features and EM probabilistic data association
+/// (Yang et al., Sensors 2022). Today the CLI inspects KITTI datasets and evaluates
+/// trajectories the way the KITTI devkit and evo do.
+#[derive(Parser, Debug)]
+#[command(name = "semloc", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Evaluate an estimated trajectory against ground truth (KITTI devkit t_rel/r_rel, ATE).
+    Eval(cli::eval::EvalArgs),
+    /// Describe what a KITTI dataset folder (odometry or raw layout) holds.
+    Info(cli::info::InfoArgs),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Eval(args) => cli::eval::run(&args),
+        Command::Info(args) => cli::info::run(&args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

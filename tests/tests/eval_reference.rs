@@ -43,6 +43,7 @@ fn close(what: &str, got: f64, want: f64) -> Result<(), String> {
 }
 
 #[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
 fn orbslam2_stereo_kitti_00_to_10_match_devkit_and_evo() {
     let Some(data) = semloc_tests::shared_data() else { return };
     let traj = data.join("trajectories");
@@ -78,6 +79,7 @@ fn orbslam2_stereo_kitti_00_to_10_match_devkit_and_evo() {
 /// `evo_ape kitti KITTI_00_gt.txt KITTI_00_ORB.txt -a` → rmse 1.303450, mean 1.156997,
 /// median 1.065625, max 3.587949; with `-as` → rmse 0.937709; without alignment → rmse 7.790289.
 #[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
 fn evo_test_data_matches_evo_ape_cli() {
     let Some(data) = semloc_tests::shared_data() else { return };
     let dir = data.join("trajectories/evo-test");
@@ -155,6 +157,7 @@ fn synthetic_known_errors() {
 
 /// Plots of sequence 00 are written (to `$SEMLOC_PLOT_DIR` when set, to look at them).
 #[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
 fn plots_of_sequence_00() {
     let Some(data) = semloc_tests::shared_data() else { return };
     let traj = data.join("trajectories");

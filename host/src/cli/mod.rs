@@ -1,0 +1,4 @@
+//! Subcommands of the `semloc` binary.
+
+pub mod eval;
+pub mod info;

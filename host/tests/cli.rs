@@ -1,0 +1,166 @@
+//! The `semloc` binary end to end: exit codes, output and error messages naming the file.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn semloc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
+}
+
+fn text(o: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// A straight 200 m drive (KITTI pose lines), optionally with a scale error on x/z.
+fn write_drive(path: &Path, n: usize, scale: f64) {
+    let mut s = String::new();
+    for i in 0..n {
+        let z = i as f64 * scale;
+        let x = (i as f64 * 0.02).sin() * 3.0 * scale;
+        s += &format!("1 0 0 {x} 0 1 0 0 0 0 1 {z}\n");
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+#[test]
+fn eval_prints_devkit_and_ate_and_writes_json_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let gt = dir.path().join("gt.txt");
+    let est = dir.path().join("est.txt");
+    write_drive(&gt, 201, 1.0);
+    write_drive(&est, 201, 1.01);
+    let json = dir.path().join("r.json");
+    let plots = dir.path().join("plots");
+    let o = semloc(&[
+        "eval",
+        "--gt",
+        gt.to_str().unwrap(),
+        "--est",
+        est.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+        "--plot",
+        plots.to_str().unwrap(),
+    ]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{out}\n{err}");
+    assert!(out.contains("t_rel"), "{out}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let t = v["t_rel_pct"].as_f64().expect("t_rel_pct in JSON");
+    assert!((t - 1.0).abs() < 0.02, "1 % scale error gives t_rel {t}");
+    assert!(plots.join("trajectory.png").is_file() && plots.join("errors.png").is_file());
+}
+
+#[test]
+fn eval_sim3_removes_a_scale_error_that_se3_cannot() {
+    let dir = tempfile::tempdir().unwrap();
+    let gt = dir.path().join("gt.txt");
+    let est = dir.path().join("est.txt");
+    write_drive(&gt, 201, 1.0);
+    write_drive(&est, 201, 1.05);
+    let ate = |align: &str| -> f64 {
+        let json = dir.path().join(format!("{align}.json"));
+        let o = semloc(&[
+            "eval",
+            "--gt",
+            gt.to_str().unwrap(),
+            "--est",
+            est.to_str().unwrap(),
+            "--align",
+            align,
+            "--json",
+            json.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{:?}", text(&o));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        v["ate_rmse_m"].as_f64().expect("ate_rmse_m in JSON")
+    };
+    let (se3, sim3) = (ate("se3"), ate("sim3"));
+    assert!(se3 > 1.0, "se3 ATE {se3}");
+    assert!(sim3 < 1e-6, "sim3 ATE {sim3}");
+}
+
+#[test]
+fn eval_bad_pose_file_names_file_and_line_and_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let gt = dir.path().join("gt.txt");
+    let est = dir.path().join("bad_est.txt");
+    write_drive(&gt, 20, 1.0);
+    write_drive(&est, 20, 1.0);
+    let mut s = std::fs::read_to_string(&est).unwrap();
+    s = s.replacen("1 0 0 0 0 1 0 0 0 0 1 0\n", "1 0 0 0 0 1 0 0 0 0 1 0 7\n", 1);
+    std::fs::write(&est, s).unwrap();
+    let o = semloc(&["eval", "--gt", gt.to_str().unwrap(), "--est", est.to_str().unwrap()]);
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("bad_est.txt") && err.contains(":1"), "{err}");
+}
+
+#[test]
+fn eval_length_mismatch_is_an_error_not_a_truncation() {
+    let dir = tempfile::tempdir().unwrap();
+    let gt = dir.path().join("gt.txt");
+    let est = dir.path().join("est.txt");
+    write_drive(&gt, 30, 1.0);
+    write_drive(&est, 29, 1.0);
+    let o = semloc(&["eval", "--gt", gt.to_str().unwrap(), "--est", est.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    let (_, err) = text(&o);
+    assert!(err.contains("30") && err.contains("29"), "{err}");
+}
+
+#[test]
+fn eval_missing_file_is_named() {
+    let o = semloc(&["eval", "--gt", "/nonexistent/gt.txt", "--est", "/nonexistent/est.txt"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).1.contains("/nonexistent/gt.txt"));
+}
+
+#[test]
+fn info_describes_an_odometry_sequence() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = dir.path().join("sequences").join("07");
+    for cam in ["image_0", "image_1"] {
+        std::fs::create_dir_all(seq.join(cam)).unwrap();
+        for i in 0..3 {
+            image::GrayImage::new(64, 32).save(seq.join(cam).join(format!("{i:06}.png"))).unwrap();
+        }
+    }
+    let p = "7.0e+02 0 3.0e+02 0 0 7.0e+02 1.5e+02 0 0 0 1 0";
+    let p1 = "7.0e+02 0 3.0e+02 -3.5e+02 0 7.0e+02 1.5e+02 0 0 0 1 0";
+    std::fs::write(seq.join("calib.txt"), format!("P0: {p}\nP1: {p1}\nP2: {p}\nP3: {p1}\n"))
+        .unwrap();
+    std::fs::write(seq.join("times.txt"), "0.0\n0.1\n0.2\n").unwrap();
+    let o = semloc(&["info", dir.path().to_str().unwrap(), "--seq", "07", "--json"]);
+    let (out, err) = text(&o);
+    assert!(o.status.success(), "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["frames"], 3, "{out}");
+    assert!((v["calib"]["baseline_m"].as_f64().unwrap() - 0.5).abs() < 1e-9, "{out}");
+    assert_eq!(v["has_gt"], false, "{out}");
+}
+
+#[test]
+fn info_on_a_folder_without_a_dataset_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = semloc(&["info", dir.path().to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).1.contains(dir.path().to_str().unwrap()));
+}
+
+#[test]
+fn help_explains_every_flag() {
+    let (out, _) = text(&semloc(&["eval", "--help"]));
+    for flag in ["--gt", "--est", "--format", "--align", "--max-time-diff", "--json", "--plot"] {
+        assert!(out.contains(flag), "eval --help lacks {flag}");
+    }
+    let (out, _) = text(&semloc(&["info", "--help"]));
+    for flag in ["--seq", "--drive", "--pair", "--json"] {
+        assert!(out.contains(flag), "info --help lacks {flag}");
+    }
+}
