@@ -9,21 +9,16 @@ use heapless::Vec;
 /// Most features a frame holds (ORB-SLAM2 extracts 2000 on KITTI; the rest is headroom).
 pub const FRAME_CAPACITY: usize = 2048;
 
-/// A 256-bit binary descriptor (rBRIEF), as 32 bytes.
+/// A 256-bit binary descriptor (rBRIEF) as its 32 raw bytes, OpenCV's bit layout: the bytes of
+/// [`crate::orb::Descriptor`] (`desc.0`). Kept as a plain array here because the map stores
+/// and compares descriptors as bytes.
 pub type Descriptor = [u8; 32];
 
-/// Hamming distance between two 256-bit descriptors.
+/// Hamming distance between two 256-bit descriptors; the one popcount kernel is
+/// [`crate::orb::hamming`], this only adapts the raw-byte form.
 #[inline]
 pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
-    let mut d = 0;
-    for (x, y) in a.chunks_exact(8).zip(b.chunks_exact(8)) {
-        let mut xa = [0u8; 8];
-        let mut ya = [0u8; 8];
-        xa.copy_from_slice(x);
-        ya.copy_from_slice(y);
-        d += (u64::from_le_bytes(xa) ^ u64::from_le_bytes(ya)).count_ones();
-    }
-    d
+    crate::orb::hamming(&crate::orb::Descriptor(*a), &crate::orb::Descriptor(*b))
 }
 
 /// One left-image feature.

@@ -24,4 +24,5 @@ pub mod map;
 pub mod math;
 pub mod optim;
 pub mod orb;
+pub mod stereo;
 pub mod tracker;

@@ -1,0 +1,1092 @@
+//! Stereo matching of ORB key points on a rectified pair: ORB-SLAM2's
+//! `Frame::ComputeStereoMatches` (Mur-Artal & Tardós 2017, §III-A, "stereo key points"), in
+//! fixed memory.
+//!
+//! For each left key point `(u_L, v_L)` on level `l`:
+//! 1. **Row band.** Every right key point is registered on the level-0 rows
+//!    `⌊y − r⌋ ..= ⌈y + r⌉`, `r = 2·sˡᵉᵛᵉˡ` (its own level's scale), in a CSR row index; the
+//!    candidates of a left point are the entries of row `⌊v_L⌋`.
+//! 2. **Descriptor match.** Among candidates on levels `l − 1 ..= l + 1` with
+//!    `u_R ∈ [u_L − maxD, u_L − minD]` (`minZ = b`, `minD = 0`, `maxD = bf / minZ`), the
+//!    smallest Hamming distance wins (first on ties); it must be below
+//!    `(TH_HIGH + TH_LOW)/2 = 75`.
+//! 3. **SAD refinement** on level `l` of both (unblurred) pyramids: an 11 × 11 window around
+//!    `round(u_L/sˡ), round(v_L/sˡ)`, each patch minus its centre pixel (ORB-SLAM2's
+//!    `IL = IL - IL.at(w,w)`), slid over `round(u_R/sˡ) ± 5`; L1 distance. A minimum at the
+//!    search border is rejected; a parabola through the three distances around the minimum
+//!    gives `Δ = (d₁ − d₃) / (2(d₁ + d₃ − 2d₂))`, rejected when `|Δ| > 1`; then
+//!    `u_R = sˡ(round(u_R/sˡ) + inc + Δ)`, disparity `u_L − u_R` kept when in `[minD, maxD)`
+//!    (≤ 0 becomes 0.01, as ORB-SLAM2), depth `bf / disparity`.
+//! 4. **Outliers.** Matches sorted by SAD distance; those above `1.5 · 1.4 · median` lose their
+//!    depth.
+//!
+//! **Where this differs from ORB-SLAM2, and why:**
+//! - A match is dropped when its SAD distance is *above* the threshold (ORB-SLAM2: *at or
+//!   above*), so a median distance of 0 (noise-free input) does not reject every match.
+//! - The right search window is bounds-checked as `round(u_R/sˡ) − L − w ≥ 0` and
+//!   `round(u_R/sˡ) + L + w < width` (ORB-SLAM2 checks `+L−w` on the left, a typo that lets
+//!   OpenCV assert), and the left window and every row are checked too: nothing derived from
+//!   key-point data indexes without a check, so no input can panic.
+//! - Rows of the row band are clamped to the image (ORB-SLAM2 writes out of its row vector
+//!   for key points within `r` of the top or bottom edge).
+//! - Pixel arithmetic is integer (exactly ORB-SLAM2's float values, which are integers); the
+//!   parabola and depth are `f32` in ORB-SLAM2's operation order: bit-identical on every target.
+//!
+//! **Memory.** [`StereoMatcher<MAX_KP, MAX_ROWS, MAX_ENTRIES>`] owns the row index
+//! (`8·MAX_ROWS + 2·MAX_ENTRIES` bytes) and the match list (`8·MAX_KP` bytes); nothing else,
+//! and no stack arrays beyond one 21 × 21 patch. Row entries past `MAX_ENTRIES` are dropped
+//! (the latest rows first) and counted in [`StereoStats::row_overflow`]. [`KittiStereoMatcher`]
+//! (1248 × 384, 2048 key points) takes [`KITTI_STEREO_MATCHER_BYTES`] ≈ 84 KiB and never
+//! overflows with ORB-SLAM2's 8 levels of 1.2 (a key point spans at most 16 rows).
+//!
+//! ```
+//! use semloc_core::frame::Frame;
+//! use semloc_core::image::ImageView;
+//! use semloc_core::orb::{pyramid_capacity, OrbConfig, OrbExtractor};
+//! use semloc_core::stereo::{StereoMatcher, StereoParams};
+//!
+//! type Ext = OrbExtractor<160, { 160 * 120 }, { pyramid_capacity(160, 120, 8) }, 256, 4096>;
+//! let (mut el, mut er) = (Box::new(Ext::new()), Box::new(Ext::new()));
+//! el.configure(OrbConfig { n_features: 200, ..OrbConfig::KITTI }).unwrap();
+//! er.configure(OrbConfig { n_features: 200, ..OrbConfig::KITTI }).unwrap();
+//! // A right image that is the left one shifted by 8 px: disparity 8 everywhere.
+//! let tex = |x: usize, y: usize| (((x * 7 + y * 13) ^ (x * y / 5)) % 251) as u8;
+//! let left: Vec<u8> = (0..160 * 120).map(|i| tex(i % 160, i / 160)).collect();
+//! let right: Vec<u8> = (0..160 * 120).map(|i| tex(i % 160 + 8, i / 160)).collect();
+//! el.extract(&ImageView::from_slice(&left, 160, 120).unwrap()).unwrap();
+//! er.extract(&ImageView::from_slice(&right, 160, 120).unwrap()).unwrap();
+//!
+//! let mut matcher = Box::new(StereoMatcher::<256, 128, 4096>::new());
+//! let mut frame = Box::new(Frame::new());
+//! let params = StereoParams::new(40.0, 0.5); // fx = 80 px, baseline 0.5 m
+//! let stats = matcher
+//!     .match_frame(el.features(), el.pyramid(), er.features(), er.pyramid(), &params, 0.0, &mut frame)
+//!     .unwrap();
+//! assert_eq!(frame.features.len(), el.features().len());
+//! assert_eq!(frame.stereo_count(), stats.matched as usize);
+//! assert!(stats.matched > 0);
+//! ```
+
+use core::fmt;
+
+use crate::frame::{Feature, Frame, FRAME_CAPACITY};
+use crate::image::ImageView;
+use crate::math;
+use crate::orb::{
+    hamming, Descriptor, Features, KeyPoint, LevelInfo, Pyramid, KITTI_MAX_FEATURES,
+    KITTI_MAX_HEIGHT,
+};
+
+/// ORB-SLAM2's `ORBmatcher::TH_HIGH`.
+pub const TH_HIGH: u32 = 100;
+/// ORB-SLAM2's `ORBmatcher::TH_LOW`.
+pub const TH_LOW: u32 = 50;
+/// Default Hamming acceptance bound, `(TH_HIGH + TH_LOW) / 2` (a match needs a distance below it).
+pub const DEFAULT_MAX_HAMMING: u32 = (TH_HIGH + TH_LOW) / 2;
+/// Largest SAD half window [`StereoParams::sad_half_window`] accepts (21 × 21 patch).
+pub const MAX_SAD_HALF_WINDOW: usize = 10;
+/// Largest SAD search half range [`StereoParams::sad_search`] accepts.
+pub const MAX_SAD_SEARCH: i32 = 32;
+
+const MAX_PATCH: usize = (2 * MAX_SAD_HALF_WINDOW + 1) * (2 * MAX_SAD_HALF_WINDOW + 1);
+const MAX_DISTS: usize = 2 * MAX_SAD_SEARCH as usize + 1;
+
+/// Stereo calibration and matching parameters (ORB-SLAM2: `Camera.bf`, `mb`, and constants).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StereoParams {
+    /// Baseline times focal length, `b·f_x` (px·m); depth = `bf / disparity`.
+    pub bf_px_m: f32,
+    /// Baseline (m); the nearest depth searched (`minZ`), so `maxD = bf / baseline`.
+    pub baseline_m: f32,
+    /// A descriptor match needs a Hamming distance below this (ORB-SLAM2: 75).
+    pub max_hamming: u32,
+    /// Half side `w` of the SAD window (ORB-SLAM2: 5, an 11 × 11 window),
+    /// 1..=[`MAX_SAD_HALF_WINDOW`].
+    pub sad_half_window: usize,
+    /// Half range `L` of the SAD search in level pixels (ORB-SLAM2: 5), 2..=[`MAX_SAD_SEARCH`].
+    pub sad_search: i32,
+}
+
+impl StereoParams {
+    /// ORB-SLAM2's settings for a rig with `bf_px_m` and `baseline_m`.
+    pub const fn new(bf_px_m: f32, baseline_m: f32) -> Self {
+        Self {
+            bf_px_m,
+            baseline_m,
+            max_hamming: DEFAULT_MAX_HAMMING,
+            sad_half_window: 5,
+            sad_search: 5,
+        }
+    }
+
+    /// KITTI odometry sequences 00–02 (`KITTI00-02.yaml`: `bf` 386.1448, `fx` 718.856).
+    pub const KITTI_00_02: StereoParams = StereoParams::new(386.1448, 386.1448 / 718.856);
+}
+
+/// Why [`StereoMatcher::match_frame`] refused a frame (nothing was matched).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StereoError {
+    /// `bf_px_m` or `baseline_m` is not finite and positive.
+    BadCalibration {
+        /// The `bf_px_m` given.
+        bf_px_m: f32,
+        /// The `baseline_m` given.
+        baseline_m: f32,
+    },
+    /// The SAD window or search range is outside its supported range.
+    BadWindow {
+        /// The `sad_half_window` given.
+        half_window: usize,
+        /// The `sad_search` given.
+        search: i32,
+    },
+    /// A pyramid has no level.
+    EmptyPyramid,
+    /// The two pyramids have different level counts.
+    LevelCountMismatch {
+        /// Levels of the left pyramid.
+        left: usize,
+        /// Levels of the right pyramid.
+        right: usize,
+    },
+    /// A level has different sizes in the two pyramids.
+    SizeMismatch {
+        /// The level.
+        level: usize,
+    },
+    /// The image has more rows than the row index holds.
+    TooManyRows {
+        /// Rows of level 0.
+        rows: usize,
+        /// `MAX_ROWS`.
+        cap: usize,
+    },
+    /// One side has more key points than the matcher (or the output frame) holds.
+    TooManyKeypoints {
+        /// Key points given.
+        got: usize,
+        /// What fits.
+        cap: usize,
+    },
+}
+
+impl fmt::Display for StereoError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            StereoError::BadCalibration { bf_px_m, baseline_m } => write!(
+                f,
+                "bad stereo calibration: bf {bf_px_m} px·m and baseline {baseline_m} m must be \
+                 finite and positive"
+            ),
+            StereoError::BadWindow { half_window, search } => write!(
+                f,
+                "bad SAD window: half window {half_window} (1..={MAX_SAD_HALF_WINDOW}), search \
+                 {search} (2..={MAX_SAD_SEARCH})"
+            ),
+            StereoError::EmptyPyramid => write!(f, "stereo pyramid has no level"),
+            StereoError::LevelCountMismatch { left, right } => {
+                write!(f, "pyramid levels differ: left {left}, right {right}")
+            }
+            StereoError::SizeMismatch { level } => {
+                write!(f, "left and right pyramid level {level} sizes differ")
+            }
+            StereoError::TooManyRows { rows, cap } => {
+                write!(f, "image has {rows} rows, the stereo row index holds {cap}")
+            }
+            StereoError::TooManyKeypoints { got, cap } => {
+                write!(f, "{got} key points, the stereo matcher holds {cap}")
+            }
+        }
+    }
+}
+
+impl core::error::Error for StereoError {}
+
+/// Counters of one [`StereoMatcher::match_frame`] call.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct StereoStats {
+    /// Left key points (one output feature each).
+    pub left: u32,
+    /// Right key points.
+    pub right: u32,
+    /// Left key points skipped as invalid: level outside the pyramid, or position not finite
+    /// or outside the image.
+    pub invalid: u32,
+    /// Left key points whose best descriptor distance passed `max_hamming`.
+    pub descriptor_matched: u32,
+    /// Final stereo matches (features with `ur` and `depth_m`).
+    pub matched: u32,
+    /// Descriptor matches whose SAD window or search range leaves the level image.
+    pub rejected_window: u32,
+    /// Descriptor matches whose SAD minimum lies on the search border.
+    pub rejected_sad_border: u32,
+    /// Descriptor matches whose parabola offset `|Δ|` exceeds 1 (or is undefined).
+    pub rejected_parabola: u32,
+    /// Refined matches whose disparity lies outside `[minD, maxD)`.
+    pub rejected_disparity: u32,
+    /// Matches dropped by the `1.5 · 1.4 · median` SAD rule.
+    pub rejected_median: u32,
+    /// Median SAD distance of the refined matches (0 when there were none).
+    pub median_sad: u32,
+    /// Row-index entries dropped because `MAX_ENTRIES` was full.
+    pub row_overflow: u32,
+}
+
+/// A refinement outcome other than a match.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reject {
+    Window,
+    Border,
+    Parabola,
+}
+
+/// The stereo matcher: a CSR row index over right key points for images up to `MAX_ROWS` rows,
+/// `MAX_ENTRIES` row entries, and up to `MAX_KP` key points per side (`MAX_KP ≤ 65536`).
+///
+/// `const fn new`, so it can live in a `static`; one call of
+/// [`StereoMatcher::match_frame`] per frame.
+#[derive(Clone, Debug)]
+pub struct StereoMatcher<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize> {
+    /// End (exclusive) of each row's entries; row `r` starts at `row_end[r − 1]` (0 for r = 0).
+    row_end: [u32; MAX_ROWS],
+    /// Per-row counts, then per-row fill cursors while the index is built.
+    cursor: [u32; MAX_ROWS],
+    /// Right key-point indices, grouped by row, in key-point order within a row.
+    entries: [u16; MAX_ENTRIES],
+    /// (SAD distance, left index) of the refined matches.
+    matches: [(u32, u16); MAX_KP],
+}
+
+/// Row-entry capacity of [`KittiStereoMatcher`]: 16 rows for each of 2048 key points, the most
+/// a key point on level 7 at scale 1.2 spans (`r = 2·1.2⁷ ≈ 7.2`).
+pub const KITTI_STEREO_MAX_ENTRIES: usize = KITTI_MAX_FEATURES * 16;
+
+/// The matcher sized for KITTI: 384 rows, 2048 key points per side.
+pub type KittiStereoMatcher =
+    StereoMatcher<KITTI_MAX_FEATURES, KITTI_MAX_HEIGHT, KITTI_STEREO_MAX_ENTRIES>;
+
+/// `size_of::<KittiStereoMatcher>()`.
+pub const KITTI_STEREO_MATCHER_BYTES: usize = core::mem::size_of::<KittiStereoMatcher>();
+
+/// Memory budget of [`KittiStereoMatcher`]: 96 KiB (row index 67 KiB, match list 16 KiB).
+pub const KITTI_STEREO_MATCHER_BUDGET: usize = 96 << 10;
+
+const _: () = assert!(KITTI_STEREO_MATCHER_BYTES <= KITTI_STEREO_MATCHER_BUDGET);
+
+impl<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize> Default
+    for StereoMatcher<MAX_KP, MAX_ROWS, MAX_ENTRIES>
+{
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize>
+    StereoMatcher<MAX_KP, MAX_ROWS, MAX_ENTRIES>
+{
+    /// Right key-point indices are stored as `u16`; row offsets as `u32`.
+    const CAPACITIES_FIT: () = assert!(
+        MAX_KP <= 1 << 16 && MAX_ENTRIES <= u32::MAX as usize,
+        "StereoMatcher: MAX_KP must be ≤ 65536 and MAX_ENTRIES < 2³²"
+    );
+
+    /// A zeroed matcher (`const`: it can initialise a `static`).
+    pub const fn new() -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::CAPACITIES_FIT;
+        Self {
+            row_end: [0; MAX_ROWS],
+            cursor: [0; MAX_ROWS],
+            entries: [0; MAX_ENTRIES],
+            matches: [(0, 0); MAX_KP],
+        }
+    }
+
+    /// Matches the left features against the right ones and writes one [`Feature`] per left
+    /// key point (same order) into `out`, with `ur`/`depth_m` set on stereo matches (`ur = −1`,
+    /// `depth_m = 0` otherwise) and `out.timestamp_s = timestamp_s`.
+    ///
+    /// `left_pyr`/`right_pyr` are the (unblurred) pyramids the features were extracted from,
+    /// e.g. [`crate::orb::OrbExtractor::pyramid`] of two extractors. On error `out` is left
+    /// empty.
+    #[allow(clippy::too_many_arguments)]
+    pub fn match_frame<const W: usize, const P: usize, const N: usize>(
+        &mut self,
+        left: &Features<N>,
+        left_pyr: &Pyramid<W, P>,
+        right: &Features<N>,
+        right_pyr: &Pyramid<W, P>,
+        params: &StereoParams,
+        timestamp_s: f64,
+        out: &mut Frame,
+    ) -> Result<StereoStats, StereoError> {
+        out.features.clear();
+        out.timestamp_s = timestamp_s;
+        let rows = validate::<MAX_KP, MAX_ROWS, W, P, N>(left, left_pyr, right, right_pyr, params)?;
+        let n_levels = left_pyr.n_levels();
+        let mut stats = StereoStats {
+            left: left.len() as u32,
+            right: right.len() as u32,
+            ..StereoStats::default()
+        };
+
+        stats.row_overflow = self.build_row_index(right.keypoints(), left_pyr, rows);
+
+        let min_d = 0.0f32;
+        let max_d = params.bf_px_m / params.baseline_m;
+        let mut n_matches = 0usize;
+        for (il, (kl, dl)) in left.keypoints().iter().zip(left.descriptors()).enumerate() {
+            let mut feat = Feature {
+                x: kl.x,
+                y: kl.y,
+                level: kl.level,
+                angle: kl.angle_deg * (core::f32::consts::PI / 180.0),
+                desc: dl.0,
+                ur: -1.0,
+                depth_m: 0.0,
+            };
+            let level = usize::from(kl.level);
+            let (u_l, v_l) = (kl.x, kl.y);
+            // `!(a >= b)` also catches NaN.
+            let row_ok = v_l >= 0.0 && (v_l as usize) < rows;
+            if level >= n_levels || !row_ok || !u_l.is_finite() {
+                stats.invalid += 1;
+                push(out, feat);
+                continue;
+            }
+            let Some(best_r) = self.best_candidate(
+                kl,
+                dl,
+                right,
+                v_l as usize,
+                (u_l - max_d, u_l - min_d),
+                params.max_hamming,
+            ) else {
+                push(out, feat);
+                continue;
+            };
+            stats.descriptor_matched += 1;
+            let Some(kr) = right.keypoints().get(best_r) else {
+                push(out, feat);
+                continue;
+            };
+            let info = left_pyr.info(level);
+            let refined = sad_refine(
+                &left_pyr.level(level),
+                &right_pyr.level(level),
+                &info,
+                u_l,
+                v_l,
+                kr.x,
+                params.sad_half_window,
+                params.sad_search,
+            );
+            match refined {
+                Err(Reject::Window) => stats.rejected_window += 1,
+                Err(Reject::Border) => stats.rejected_sad_border += 1,
+                Err(Reject::Parabola) => stats.rejected_parabola += 1,
+                Ok((mut best_ur, dist)) => {
+                    let mut disparity = u_l - best_ur;
+                    if disparity >= min_d && disparity < max_d {
+                        if disparity <= 0.0 {
+                            disparity = 0.01;
+                            best_ur = u_l - 0.01;
+                        }
+                        feat.depth_m = params.bf_px_m / disparity;
+                        feat.ur = best_ur;
+                        if let Some(m) = self.matches.get_mut(n_matches) {
+                            *m = (dist, il as u16);
+                            n_matches += 1;
+                        }
+                    } else {
+                        stats.rejected_disparity += 1;
+                    }
+                }
+            }
+            push(out, feat);
+        }
+
+        let matches = &mut self.matches[..n_matches];
+        let (median, rejected) = median_reject(matches);
+        stats.median_sad = median;
+        for &(_, il) in rejected.iter() {
+            if let Some(f) = out.features.get_mut(usize::from(il)) {
+                f.ur = -1.0;
+                f.depth_m = 0.0;
+            }
+        }
+        stats.rejected_median = rejected.len() as u32;
+        stats.matched = (n_matches - rejected.len()) as u32;
+        Ok(stats)
+    }
+
+    /// Builds the CSR row index of the right key points over `rows` level-0 rows; returns the
+    /// number of entries dropped for lack of room.
+    fn build_row_index<const W: usize, const P: usize>(
+        &mut self,
+        right: &[KeyPoint],
+        pyr: &Pyramid<W, P>,
+        rows: usize,
+    ) -> u32 {
+        let counts = &mut self.cursor[..rows];
+        counts.fill(0);
+        for kp in right {
+            if let Some((r0, r1)) = row_span(kp, pyr, rows) {
+                for c in &mut counts[r0..=r1] {
+                    *c += 1;
+                }
+            }
+        }
+        // Prefix sums, clamped to the capacity: the rows that do not fit lose their tail.
+        let mut total = 0u64;
+        let mut end = 0u32;
+        for (c, e) in counts.iter_mut().zip(self.row_end[..rows].iter_mut()) {
+            total += u64::from(*c);
+            let start = end;
+            end = (u64::from(end) + u64::from(*c)).min(MAX_ENTRIES as u64) as u32;
+            *e = end;
+            *c = start;
+        }
+        for (i, kp) in right.iter().enumerate() {
+            if let Some((r0, r1)) = row_span(kp, pyr, rows) {
+                for r in r0..=r1 {
+                    let cur = self.cursor[r];
+                    if cur < self.row_end[r] {
+                        if let Some(slot) = self.entries.get_mut(cur as usize) {
+                            *slot = i as u16;
+                        }
+                        self.cursor[r] = cur + 1;
+                    }
+                }
+            }
+        }
+        (total - u64::from(end)).min(u64::from(u32::MAX)) as u32
+    }
+
+    /// The right key point on `row` with the smallest Hamming distance to `(kl, dl)` among
+    /// those on levels `level ± 1` with `u_R` in `u_range` (inclusive), if below `max_hamming`.
+    fn best_candidate<const N: usize>(
+        &self,
+        kl: &KeyPoint,
+        dl: &Descriptor,
+        right: &Features<N>,
+        row: usize,
+        u_range: (f32, f32),
+        max_hamming: u32,
+    ) -> Option<usize> {
+        let (min_u, max_u) = u_range;
+        if max_u < 0.0 {
+            return None;
+        }
+        let start = if row == 0 { 0 } else { *self.row_end.get(row - 1)? as usize };
+        let end = *self.row_end.get(row)? as usize;
+        let cands = self.entries.get(start..end)?;
+        let (kps, descs) = (right.keypoints(), right.descriptors());
+        let level = i32::from(kl.level);
+        let mut best = (u32::MAX, usize::MAX);
+        for &ir in cands {
+            let ir = usize::from(ir);
+            let (Some(kr), Some(dr)) = (kps.get(ir), descs.get(ir)) else { continue };
+            if (i32::from(kr.level) - level).abs() > 1 {
+                continue;
+            }
+            if kr.x >= min_u && kr.x <= max_u {
+                let d = hamming(dl, dr);
+                if d < best.0 {
+                    best = (d, ir);
+                }
+            }
+        }
+        (best.0 < max_hamming).then_some(best.1)
+    }
+}
+
+/// Checks parameters, pyramids and key-point counts; returns the level-0 row count.
+fn validate<
+    const MAX_KP: usize,
+    const MAX_ROWS: usize,
+    const W: usize,
+    const P: usize,
+    const N: usize,
+>(
+    left: &Features<N>,
+    left_pyr: &Pyramid<W, P>,
+    right: &Features<N>,
+    right_pyr: &Pyramid<W, P>,
+    params: &StereoParams,
+) -> Result<usize, StereoError> {
+    let (bf, b) = (params.bf_px_m, params.baseline_m);
+    if !(bf.is_finite() && bf > 0.0 && b.is_finite() && b > 0.0) {
+        return Err(StereoError::BadCalibration { bf_px_m: bf, baseline_m: b });
+    }
+    let (w, l) = (params.sad_half_window, params.sad_search);
+    if !(1..=MAX_SAD_HALF_WINDOW).contains(&w) || !(2..=MAX_SAD_SEARCH).contains(&l) {
+        return Err(StereoError::BadWindow { half_window: w, search: l });
+    }
+    let n_levels = left_pyr.n_levels();
+    if n_levels != right_pyr.n_levels() {
+        return Err(StereoError::LevelCountMismatch {
+            left: n_levels,
+            right: right_pyr.n_levels(),
+        });
+    }
+    if n_levels == 0 {
+        return Err(StereoError::EmptyPyramid);
+    }
+    for level in 0..n_levels {
+        let (a, c) = (left_pyr.info(level), right_pyr.info(level));
+        if a.width != c.width || a.height != c.height {
+            return Err(StereoError::SizeMismatch { level });
+        }
+    }
+    let rows = left_pyr.info(0).height;
+    if rows > MAX_ROWS {
+        return Err(StereoError::TooManyRows { rows, cap: MAX_ROWS });
+    }
+    let cap = MAX_KP.min(FRAME_CAPACITY);
+    for got in [left.len(), right.len()] {
+        if got > cap {
+            return Err(StereoError::TooManyKeypoints { got, cap });
+        }
+    }
+    Ok(rows)
+}
+
+/// Pushes into a frame whose capacity was checked by `validate`.
+#[inline]
+fn push(out: &mut Frame, f: Feature) {
+    // `validate` bounds the key points by FRAME_CAPACITY: this cannot fail.
+    let _ = out.features.push(f);
+}
+
+/// Level-0 rows `⌊y − r⌋ ..= ⌈y + r⌉` (clamped to the image), `r = 2·sˡᵉᵛᵉˡ`, of a right key
+/// point; `None` for an invalid level or a span outside the image.
+fn row_span<const W: usize, const P: usize>(
+    kp: &KeyPoint,
+    pyr: &Pyramid<W, P>,
+    rows: usize,
+) -> Option<(usize, usize)> {
+    let level = usize::from(kp.level);
+    if level >= pyr.n_levels() || rows == 0 || !kp.y.is_finite() {
+        return None;
+    }
+    let r = 2.0 * pyr.info(level).scale;
+    // `as` saturates; ceil(x) = −floor(−x).
+    let lo = math::floorf(kp.y - r) as i64;
+    let hi = -math::floorf(-(kp.y + r)) as i64;
+    let last = rows as i64 - 1;
+    if hi < 0 || lo > last {
+        return None;
+    }
+    Some((lo.max(0) as usize, hi.min(last) as usize))
+}
+
+/// SAD refinement of a descriptor match on one pyramid level (see the module docs): the
+/// refined level-0 `u_R` and the best SAD distance.
+#[allow(clippy::too_many_arguments)]
+fn sad_refine(
+    img_l: &ImageView<'_>,
+    img_r: &ImageView<'_>,
+    info: &LevelInfo,
+    u_l: f32,
+    v_l: f32,
+    u_r0: f32,
+    half_window: usize,
+    search: i32,
+) -> Result<(f32, u32), Reject> {
+    let w = half_window.min(MAX_SAD_HALF_WINDOW) as i64;
+    let big_l = i64::from(search.clamp(1, MAX_SAD_SEARCH));
+    let inv = info.inv_scale;
+    if !(u_l.is_finite() && v_l.is_finite() && u_r0.is_finite()) {
+        return Err(Reject::Window);
+    }
+    // Clamped so the bound checks below cannot overflow (`as` saturates).
+    let px = |x: f32| (math::roundf(x * inv) as i64).clamp(-(1 << 40), 1 << 40);
+    let (su_l, sv_l, su_r0) = (px(u_l), px(v_l), px(u_r0));
+    let (width, height) = (img_l.width() as i64, img_l.height() as i64);
+    if img_r.width() as i64 != width || img_r.height() as i64 != height {
+        return Err(Reject::Window);
+    }
+    if sv_l - w < 0
+        || sv_l + w >= height
+        || su_l - w < 0
+        || su_l + w >= width
+        || su_r0 - big_l - w < 0
+        || su_r0 + big_l + w >= width
+    {
+        return Err(Reject::Window);
+    }
+    // All indices below are inside the level: checked just above.
+    let side = (2 * w + 1) as usize;
+    let (x0_l, y0) = ((su_l - w) as usize, (sv_l - w) as usize);
+    let centre_l = i32::from(img_l.row(sv_l as usize)[su_l as usize]);
+    let mut patch = [0i32; MAX_PATCH];
+    for (dy, prow) in patch.chunks_exact_mut(side).take(side).enumerate() {
+        let src = &img_l.row(y0 + dy)[x0_l..x0_l + side];
+        for (p, &s) in prow.iter_mut().zip(src) {
+            *p = i32::from(s) - centre_l;
+        }
+    }
+    let mut dists = [0u32; MAX_DISTS];
+    let mut best = (u32::MAX, 0i64);
+    for inc in -big_l..=big_l {
+        let cx = (su_r0 + inc) as usize;
+        let centre_r = i32::from(img_r.row(sv_l as usize)[cx]);
+        let x0_r = cx - w as usize;
+        let mut dist = 0u32;
+        for (dy, prow) in patch.chunks_exact(side).take(side).enumerate() {
+            let src = &img_r.row(y0 + dy)[x0_r..x0_r + side];
+            for (&p, &s) in prow.iter().zip(src) {
+                dist += (i32::from(s) - centre_r - p).unsigned_abs();
+            }
+        }
+        dists[(inc + big_l) as usize] = dist;
+        if dist < best.0 {
+            best = (dist, inc);
+        }
+    }
+    let (best_dist, best_inc) = best;
+    if best_inc == -big_l || best_inc == big_l {
+        return Err(Reject::Border);
+    }
+    let k = (best_inc + big_l) as usize;
+    let (d1, d2, d3) = (dists[k - 1] as f32, dists[k] as f32, dists[k + 1] as f32);
+    let delta = parabola_offset(d1, d2, d3).ok_or(Reject::Parabola)?;
+    let best_ur = info.scale * (su_r0 as f32 + best_inc as f32 + delta);
+    Ok((best_ur, best_dist))
+}
+
+/// Vertex offset of the parabola through `(−1, d1), (0, d2), (1, d3)`, ORB-SLAM2's
+/// `(d1 − d3) / (2(d1 + d3 − 2d2))`; `None` when `|Δ| > 1` or undefined.
+#[inline]
+fn parabola_offset(d1: f32, d2: f32, d3: f32) -> Option<f32> {
+    let delta = (d1 - d3) / (2.0 * (d1 + d3 - 2.0 * d2));
+    (-1.0..=1.0).contains(&delta).then_some(delta)
+}
+
+/// Sorts `(distance, index)` matches and returns the median distance and the tail whose
+/// distance exceeds `1.5 · 1.4 · median` (ORB-SLAM2's rule, strict; see the module docs).
+fn median_reject(matches: &mut [(u32, u16)]) -> (u32, &[(u32, u16)]) {
+    if matches.is_empty() {
+        return (0, &[]);
+    }
+    matches.sort_unstable();
+    let median = matches[matches.len() / 2].0;
+    let th = 1.5f32 * 1.4f32 * median as f32;
+    let keep = matches.partition_point(|&(d, _)| d as f32 <= th);
+    (median, &matches[keep..])
+}
+
+#[cfg(test)]
+mod tests {
+    //! Synthetic rectified pairs: the right image is the left one shifted by a known disparity
+    //! per row band, so every match has an exact expected `u_R`. Extractors are megabytes, so
+    //! they live in a `static` (built by their `const fn new`, as on the target).
+
+    use std::boxed::Box;
+    use std::sync::Mutex;
+    use std::vec::Vec;
+
+    use super::*;
+    use crate::orb::{pyramid_capacity, OrbConfig, OrbExtractor};
+
+    const W: usize = 640;
+    const H: usize = 240;
+    const PYR: usize = pyramid_capacity(W, H, 8);
+    type TestExt = OrbExtractor<W, { W * H }, PYR, 2048, 16384>;
+    type TestMatcher = StereoMatcher<2048, 256, { 2048 * 16 }>;
+
+    static EXTS: Mutex<(TestExt, TestExt)> = Mutex::new((TestExt::new(), TestExt::new()));
+
+    /// fx = 500 px, baseline 0.5 m.
+    const PARAMS: StereoParams = StereoParams::new(250.0, 0.5);
+
+    struct Rng(u32);
+    impl Rng {
+        fn below(&mut self, n: u32) -> u32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 17;
+            self.0 ^= self.0 << 5;
+            self.0 % n
+        }
+    }
+
+    /// Value noise (random levels on 9- and 4-px grids, bilinear) under random rectangles,
+    /// 3×3 box blurred: unique texture everywhere and corners at every scale.
+    fn texture(w: usize, h: usize, seed: u32) -> Vec<u8> {
+        let mut rng = Rng(seed | 1);
+        let mut img = vec![0u8; w * h];
+        let mut acc = vec![0u32; w * h];
+        for cell in [9usize, 4] {
+            let (gw, gh) = (w / cell + 2, h / cell + 2);
+            let grid: Vec<u32> = (0..gw * gh).map(|_| rng.below(256)).collect();
+            for y in 0..h {
+                for x in 0..w {
+                    let (gx, gy) = (x / cell, y / cell);
+                    let (fx, fy) = ((x % cell) as u32, (y % cell) as u32);
+                    let c = cell as u32;
+                    let g = |i: usize, j: usize| grid[(gy + j) * gw + gx + i];
+                    let top = g(0, 0) * (c - fx) + g(1, 0) * fx;
+                    let bot = g(0, 1) * (c - fx) + g(1, 1) * fx;
+                    acc[y * w + x] += (top * (c - fy) + bot * fy) / (c * c);
+                }
+            }
+        }
+        for (p, a) in img.iter_mut().zip(&acc) {
+            *p = (a / 2) as u8;
+        }
+        for _ in 0..w * h / 400 {
+            let (rw, rh) = (3 + rng.below(30) as usize, 3 + rng.below(30) as usize);
+            let (x0, y0) = (rng.below(w as u32) as usize, rng.below(h as u32) as usize);
+            let v = rng.below(256) as u8;
+            for y in y0..(y0 + rh).min(h) {
+                for p in &mut img[y * w + x0..y * w + (x0 + rw).min(w)] {
+                    *p = ((u16::from(*p) + 3 * u16::from(v)) / 4) as u8;
+                }
+            }
+        }
+        let src = img.clone();
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let mut s = 0u32;
+                for dy in 0..3 {
+                    for dx in 0..3 {
+                        s += u32::from(src[(y + dy - 1) * w + x + dx - 1]);
+                    }
+                }
+                img[y * w + x] = (s / 9) as u8;
+            }
+        }
+        img
+    }
+
+    /// `(left, right)` with `right(x, y) = left(x + d(y), y)` (content beyond the left image's
+    /// right edge continues the texture).
+    fn pair(seed: u32, d: impl Fn(usize) -> usize) -> (Vec<u8>, Vec<u8>) {
+        let tw = W + 64;
+        let t = texture(tw, H, seed);
+        let mut l = vec![0u8; W * H];
+        let mut r = vec![0u8; W * H];
+        for y in 0..H {
+            let dy = d(y);
+            l[y * W..(y + 1) * W].copy_from_slice(&t[y * tw..y * tw + W]);
+            r[y * W..(y + 1) * W].copy_from_slice(&t[y * tw + dy..y * tw + dy + W]);
+        }
+        (l, r)
+    }
+
+    fn run<const K: usize, const R: usize, const E: usize>(
+        matcher: &mut StereoMatcher<K, R, E>,
+        left: &[u8],
+        right: &[u8],
+        params: &StereoParams,
+        out: &mut Frame,
+    ) -> Result<StereoStats, StereoError> {
+        let mut g = EXTS.lock().unwrap_or_else(|e| e.into_inner());
+        let (el, er) = &mut *g;
+        el.configure(OrbConfig::KITTI).unwrap();
+        er.configure(OrbConfig::KITTI).unwrap();
+        el.extract(&ImageView::from_slice(left, W, H).unwrap()).unwrap();
+        er.extract(&ImageView::from_slice(right, W, H).unwrap()).unwrap();
+        matcher.match_frame(
+            el.features(),
+            el.pyramid(),
+            er.features(),
+            er.pyramid(),
+            params,
+            1.5,
+            out,
+        )
+    }
+
+    fn check_stats(s: &StereoStats, out: &Frame) {
+        assert_eq!(out.features.len() as u32, s.left);
+        assert_eq!(out.stereo_count() as u32, s.matched);
+        assert_eq!(
+            s.descriptor_matched,
+            s.matched
+                + s.rejected_window
+                + s.rejected_sad_border
+                + s.rejected_parabola
+                + s.rejected_disparity
+                + s.rejected_median,
+            "{s:?}"
+        );
+    }
+
+    /// `u_R` errors of the matches against `x − d(y)`, skipping rows within `margin(level)` of
+    /// a disparity change; also checks depth = bf / disparity.
+    fn ur_errors(out: &Frame, d: impl Fn(f32) -> Option<f32>) -> Vec<f32> {
+        let mut errs = Vec::new();
+        for f in out.features.iter().filter(|f| f.is_stereo()) {
+            let Some(dd) = d(f.y) else { continue };
+            let disp = f.x - f.ur;
+            assert!((f.depth_m - PARAMS.bf_px_m / disp).abs() <= 1e-4 * f.depth_m);
+            errs.push((f.ur - (f.x - dd)).abs());
+        }
+        errs.sort_by(f32::total_cmp);
+        errs
+    }
+
+    fn pct(v: &[f32], p: f32) -> f32 {
+        v[((v.len() - 1) as f32 * p) as usize]
+    }
+
+    #[test]
+    fn constant_disparity_gives_bf_over_d() {
+        let (l, r) = pair(7, |_| 20);
+        let mut m = Box::new(TestMatcher::new());
+        let mut out = Box::new(Frame::new());
+        let s = run(&mut m, &l, &r, &PARAMS, &mut out).unwrap();
+        check_stats(&s, &out);
+        assert_eq!(out.timestamp_s, 1.5);
+        let errs = ur_errors(&out, |_| Some(20.0));
+        let rate = s.matched as f32 / s.left as f32;
+        std::println!(
+            "d=20: {s:?}\n  rate {rate:.3}, |ur err| median {:.3} p90 {:.3} max {:.3}",
+            pct(&errs, 0.5),
+            pct(&errs, 0.9),
+            pct(&errs, 1.0)
+        );
+        for level in 0..8u8 {
+            let on = out.features.iter().filter(|f| f.level == level);
+            let n = on.clone().count();
+            let k = on.filter(|f| f.is_stereo()).count();
+            std::println!("  level {level}: {k}/{n}");
+        }
+        assert!(s.left > 500, "{s:?}");
+        assert!(rate > 0.55, "match rate {rate}");
+        assert!(pct(&errs, 0.5) < 0.2, "median |ur error| {}", pct(&errs, 0.5));
+        assert!(pct(&errs, 0.9) < 1.0, "p90 |ur error| {}", pct(&errs, 0.9));
+        let depths: Vec<f32> =
+            out.features.iter().filter(|f| f.is_stereo()).map(|f| f.depth_m).collect();
+        let mut depths = depths;
+        depths.sort_by(f32::total_cmp);
+        assert!((pct(&depths, 0.5) - 12.5).abs() < 0.15, "median depth {}", pct(&depths, 0.5));
+        assert_eq!(s.row_overflow, 0);
+    }
+
+    #[test]
+    fn two_planes_get_two_depths() {
+        let split = H / 2;
+        let (l, r) = pair(11, |y| if y < split { 10 } else { 30 });
+        let mut m = Box::new(TestMatcher::new());
+        let mut out = Box::new(Frame::new());
+        let s = run(&mut m, &l, &r, &PARAMS, &mut out).unwrap();
+        check_stats(&s, &out);
+        // Away from the seam (SAD windows span ±5 level rows, ≤ ±18 level-0 rows on level 7).
+        let d = |y: f32| {
+            if y < split as f32 - 20.0 {
+                Some(10.0)
+            } else if y > split as f32 + 20.0 {
+                Some(30.0)
+            } else {
+                None
+            }
+        };
+        let errs = ur_errors(&out, d);
+        let rate = s.matched as f32 / s.left as f32;
+        std::println!(
+            "two planes: {s:?}\n  rate {rate:.3}, |ur err| median {:.3} p90 {:.3}",
+            pct(&errs, 0.5),
+            pct(&errs, 0.9)
+        );
+        assert!(rate > 0.4, "match rate {rate}");
+        assert!(pct(&errs, 0.5) < 0.2, "median |ur error| {}", pct(&errs, 0.5));
+        for (lo, hi, z) in
+            [(0.0, split as f32 - 20.0, 25.0f32), (split as f32 + 20.0, H as f32, 250.0 / 30.0)]
+        {
+            let mut zs: Vec<f32> = out
+                .features
+                .iter()
+                .filter(|f| f.is_stereo() && f.y >= lo && f.y < hi)
+                .map(|f| f.depth_m)
+                .collect();
+            zs.sort_by(f32::total_cmp);
+            assert!(zs.len() > 100, "{} matches in [{lo}, {hi})", zs.len());
+            assert!((pct(&zs, 0.5) - z).abs() < 0.02 * z, "median depth {} vs {z}", pct(&zs, 0.5));
+        }
+    }
+
+    #[test]
+    fn unrelated_right_image_matches_little() {
+        let (l, _) = pair(3, |_| 20);
+        let (r, _) = pair(99, |_| 20);
+        let mut m = Box::new(TestMatcher::new());
+        let mut out = Box::new(Frame::new());
+        let s = run(&mut m, &l, &r, &PARAMS, &mut out).unwrap();
+        check_stats(&s, &out);
+        std::println!("unrelated: {s:?}");
+        // Chance descriptor matches survive only rarely, and with large SAD distances: under
+        // 10 % of the key points (a true pair matches 60 %), median SAD ≥ 5× a true pair's.
+        assert!(s.matched * 10 < s.left, "{s:?}");
+        let mut m2 = Box::new(TestMatcher::new());
+        let t = run(&mut m2, &l, &pair(3, |_| 20).1, &PARAMS, &mut out).unwrap();
+        assert!(s.matched * 5 < t.matched, "{s:?} vs {t:?}");
+        assert!(s.median_sad > 5 * t.median_sad, "{s:?} vs {t:?}");
+    }
+
+    #[test]
+    fn deterministic() {
+        let (l, r) = pair(5, |y| 12 + y / 16);
+        let bits = |f: &Frame| -> Vec<(u32, u32, u32, u32)> {
+            f.features
+                .iter()
+                .map(|f| (f.x.to_bits(), f.angle.to_bits(), f.ur.to_bits(), f.depth_m.to_bits()))
+                .collect()
+        };
+        let mut m = Box::new(TestMatcher::new());
+        let mut a = Box::new(Frame::new());
+        let sa = run(&mut m, &l, &r, &PARAMS, &mut a).unwrap();
+        // Same matcher again (stale state must not leak), then a fresh one.
+        let mut b = Box::new(Frame::new());
+        let sb = run(&mut m, &l, &r, &PARAMS, &mut b).unwrap();
+        let mut m2 = Box::new(TestMatcher::new());
+        let mut c = Box::new(Frame::new());
+        let sc = run(&mut m2, &l, &r, &PARAMS, &mut c).unwrap();
+        assert_eq!(sa, sb);
+        assert_eq!(sa, sc);
+        assert_eq!(bits(&a), bits(&b));
+        assert_eq!(bits(&a), bits(&c));
+        assert!(sa.matched > 0);
+    }
+
+    #[test]
+    fn row_overflow_is_counted_not_fatal() {
+        let (l, r) = pair(7, |_| 20);
+        let mut m = Box::new(StereoMatcher::<2048, 256, 500>::new());
+        let mut out = Box::new(Frame::new());
+        let s = run(&mut m, &l, &r, &PARAMS, &mut out).unwrap();
+        check_stats(&s, &out);
+        std::println!("overflow: {s:?}");
+        assert!(s.row_overflow > 0);
+        // Only the top rows were indexed: no match below them.
+        assert!(s.matched > 0);
+        let max_y = out.features.iter().filter(|f| f.is_stereo()).map(|f| f.y).fold(0.0, f32::max);
+        assert!(max_y < H as f32 / 2.0, "{max_y}");
+        let mut full = Box::new(TestMatcher::new());
+        let sf = run(&mut full, &l, &r, &PARAMS, &mut out).unwrap();
+        assert!(sf.matched > s.matched);
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let (l, r) = pair(7, |_| 20);
+        let mut m = Box::new(TestMatcher::new());
+        let mut out = Box::new(Frame::new());
+        for (bf, b) in [(f32::NAN, 0.5), (250.0, 0.0), (-1.0, 0.5), (250.0, f32::INFINITY)] {
+            let p = StereoParams::new(bf, b);
+            let e = run(&mut m, &l, &r, &p, &mut out).unwrap_err();
+            assert!(matches!(e, StereoError::BadCalibration { .. }), "{e:?}");
+            assert!(out.features.is_empty());
+        }
+        for (w, ls) in [(0, 5), (MAX_SAD_HALF_WINDOW + 1, 5), (5, 1), (5, MAX_SAD_SEARCH + 1)] {
+            let p = StereoParams { sad_half_window: w, sad_search: ls, ..PARAMS };
+            let e = run(&mut m, &l, &r, &p, &mut out).unwrap_err();
+            assert_eq!(e, StereoError::BadWindow { half_window: w, search: ls });
+        }
+        let mut short = Box::new(StereoMatcher::<2048, 100, 4096>::new());
+        let e = run(&mut short, &l, &r, &PARAMS, &mut out).unwrap_err();
+        assert_eq!(e, StereoError::TooManyRows { rows: H, cap: 100 });
+        let mut few = Box::new(StereoMatcher::<16, 256, 4096>::new());
+        let e = run(&mut few, &l, &r, &PARAMS, &mut out).unwrap_err();
+        assert!(matches!(e, StereoError::TooManyKeypoints { cap: 16, .. }), "{e:?}");
+
+        // Pyramids that disagree.
+        let g = EXTS.lock().unwrap_or_else(|e| e.into_inner());
+        let (el, _) = &*g;
+        let img = ImageView::from_slice(&l, W, H).unwrap();
+        let mut p4 = Box::new(Pyramid::<W, PYR>::new());
+        p4.build(&img, 1.2, 4).unwrap();
+        let e = m
+            .match_frame(el.features(), el.pyramid(), el.features(), &p4, &PARAMS, 0.0, &mut out)
+            .unwrap_err();
+        assert_eq!(e, StereoError::LevelCountMismatch { left: 8, right: 4 });
+        let small = ImageView::from_slice(&l[..W * 200], W, 200).unwrap();
+        p4.build(&small, 1.2, 8).unwrap();
+        let e = m
+            .match_frame(el.features(), el.pyramid(), el.features(), &p4, &PARAMS, 0.0, &mut out)
+            .unwrap_err();
+        assert_eq!(e, StereoError::SizeMismatch { level: 0 });
+        let empty = Box::new(Pyramid::<W, PYR>::new());
+        let e = m
+            .match_frame(el.features(), &empty, el.features(), &empty, &PARAMS, 0.0, &mut out)
+            .unwrap_err();
+        assert_eq!(e, StereoError::EmptyPyramid);
+        for e in [
+            StereoError::EmptyPyramid,
+            StereoError::BadCalibration { bf_px_m: 0.0, baseline_m: 0.0 },
+            StereoError::TooManyRows { rows: 1, cap: 0 },
+        ] {
+            assert!(!std::format!("{e}").is_empty());
+        }
+    }
+
+    #[test]
+    fn parabola_and_median_rules() {
+        assert_eq!(parabola_offset(10.0, 0.0, 10.0), Some(0.0));
+        let d = parabola_offset(30.0, 10.0, 20.0).unwrap();
+        assert!((d - 10.0 / 60.0).abs() < 1e-6);
+        assert_eq!(parabola_offset(10.0, 10.0, 10.0), None); // 0/0
+        assert_eq!(parabola_offset(100.0, 0.0, -90.0), None); // |Δ| > 1
+
+        let mut m = [(5u32, 0u16), (100, 1), (4, 2), (6, 3), (13, 4)];
+        let (median, rej) = median_reject(&mut m);
+        assert_eq!(median, 6);
+        assert_eq!(rej, &[(13, 4), (100, 1)]); // > 12.6
+        let mut z = [(0u32, 0u16), (0, 1), (0, 2), (7, 3)];
+        let (median, rej) = median_reject(&mut z);
+        assert_eq!((median, rej), (0, &[(7u32, 3u16)][..]));
+        assert_eq!(median_reject(&mut []).1.len(), 0);
+    }
+
+    #[test]
+    fn row_spans_follow_level_scale_and_clamp() {
+        let mut pyr = Box::new(Pyramid::<W, PYR>::new());
+        let px = vec![0u8; W * H];
+        pyr.build(&ImageView::from_slice(&px, W, H).unwrap(), 1.2, 8).unwrap();
+        let kp = |y: f32, level: u8| KeyPoint { x: 100.0, y, level, ..KeyPoint::default() };
+        assert_eq!(row_span(&kp(50.0, 0), &pyr, H), Some((48, 52)));
+        assert_eq!(row_span(&kp(50.5, 0), &pyr, H), Some((48, 53)));
+        // Level 7: r = 2·1.2⁷ ≈ 7.17 → 16 rows.
+        assert_eq!(row_span(&kp(50.5, 7), &pyr, H), Some((43, 58)));
+        assert_eq!(row_span(&kp(1.0, 1), &pyr, H), Some((0, 4)));
+        assert_eq!(row_span(&kp(H as f32 - 1.0, 0), &pyr, H), Some((H - 3, H - 1)));
+        assert_eq!(row_span(&kp(-10.0, 0), &pyr, H), None);
+        assert_eq!(row_span(&kp(f32::NAN, 0), &pyr, H), None);
+        assert_eq!(row_span(&kp(1e30, 0), &pyr, H), None);
+        assert_eq!(row_span(&kp(50.0, 8), &pyr, H), None);
+    }
+
+    #[test]
+    fn sad_window_outside_the_image_is_rejected() {
+        let (l, r) = pair(7, |_| 20);
+        let mut pl = Box::new(Pyramid::<W, PYR>::new());
+        let mut pr = Box::new(Pyramid::<W, PYR>::new());
+        pl.build(&ImageView::from_slice(&l, W, H).unwrap(), 1.2, 8).unwrap();
+        pr.build(&ImageView::from_slice(&r, W, H).unwrap(), 1.2, 8).unwrap();
+        let (il, ir, info) = (pl.level(0), pr.level(0), pl.info(0));
+        let refine = |u: f32, v: f32, ur: f32| sad_refine(&il, &ir, &info, u, v, ur, 5, 5);
+        assert_eq!(refine(100.0, 3.0, 80.0), Err(Reject::Window));
+        assert_eq!(refine(100.0, H as f32 - 3.0, 80.0), Err(Reject::Window));
+        assert_eq!(refine(30.0, 100.0, 8.0), Err(Reject::Window));
+        assert_eq!(refine(f32::NAN, 100.0, 80.0), Err(Reject::Window));
+        assert_eq!(refine(1e30, -1e30, 80.0), Err(Reject::Window));
+        assert_eq!(refine(W as f32 - 3.0, 100.0, W as f32 - 8.0), Err(Reject::Window));
+        // The true match refines to 80 ± 0.5 px.
+        let (ur, _) = refine(100.0, 100.0, 81.0).unwrap();
+        assert!((ur - 80.0).abs() <= 0.5, "{ur}");
+    }
+
+    #[test]
+    fn kitti_matcher_fits_its_budget() {
+        std::println!("KittiStereoMatcher: {KITTI_STEREO_MATCHER_BYTES} bytes");
+        const { assert!(KITTI_STEREO_MATCHER_BYTES <= KITTI_STEREO_MATCHER_BUDGET) };
+        let m = Box::new(KittiStereoMatcher::new());
+        assert_eq!(m.entries.len(), 32768);
+    }
+}
