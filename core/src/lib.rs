@@ -24,5 +24,6 @@ pub mod map;
 pub mod math;
 pub mod optim;
 pub mod orb;
+pub mod ransac;
 pub mod stereo;
 pub mod tracker;

@@ -7,5 +7,6 @@
 
 pub mod dataset;
 pub mod eval;
+pub mod pipeline;
 pub mod plot;
 pub mod traj;

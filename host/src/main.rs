@@ -11,8 +11,8 @@ mod cli;
 /// semloc — semantic visual localisation for automotive ECUs.
 ///
 /// Stereo SLAM with semantic ORB features and EM probabilistic data association
-/// (Yang et al., Sensors 2022). Today the CLI inspects KITTI datasets and evaluates
-/// trajectories the way the KITTI devkit and evo do.
+/// (Yang et al., Sensors 2022). The CLI runs the tracker on KITTI data, inspects datasets
+/// and evaluates trajectories the way the KITTI devkit and evo do.
 #[derive(Parser, Debug)]
 #[command(name = "semloc", version, about, long_about = None, propagate_version = true)]
 struct Cli {
@@ -26,6 +26,10 @@ enum Command {
     Eval(cli::eval::EvalArgs),
     /// Describe what a KITTI dataset folder (odometry or raw layout) holds.
     Info(cli::info::InfoArgs),
+    /// Run the stereo tracker on a KITTI sequence; write trajectory, timings and evaluation.
+    Run(cli::run::RunArgs),
+    /// Time the pipeline per stage, against OpenCV's ORB and a one-thread run of itself.
+    Bench(cli::bench::BenchArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -33,6 +37,8 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Eval(args) => cli::eval::run(&args),
         Command::Info(args) => cli::info::run(&args),
+        Command::Run(args) => cli::run::run(&args),
+        Command::Bench(args) => cli::bench::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

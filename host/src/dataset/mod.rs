@@ -299,6 +299,22 @@ impl Sequence {
         Ok((l, r))
     }
 
+    /// One image of frame `i` as luma: the left one, or the right one when `right` is true.
+    /// Lets two threads decode the two images of a frame in parallel.
+    pub fn load_luma_side(&self, i: usize, right: bool) -> Result<GrayImage, DatasetError> {
+        let paths = if right { &self.right } else { &self.left };
+        let Some(p) = paths.get(i) else {
+            return Err(DatasetError::FrameOutOfRange {
+                path: self.root.clone(),
+                index: i,
+                frames: self.len(),
+            });
+        };
+        let img = luma::load_luma_file(p)?;
+        self.check_size(p, &img)?;
+        Ok(img)
+    }
+
     fn check_size(&self, path: &Path, img: &GrayImage) -> Result<(), DatasetError> {
         if img.dimensions() == self.image_size {
             Ok(())

@@ -1,0 +1,233 @@
+//! `semloc bench`: whole-pipeline and per-stage timings, as ratios to references measured in
+//! the same invocation (OpenCV's ORB on the same frames; the pipeline on one thread).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use image::GrayImage;
+use semloc::pipeline::{FrameOutput, Pipeline, BIG_STACK_BYTES};
+use semloc_core::image::ImageView;
+use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
+use semloc_core::tracker::TrackerParams;
+
+use super::info::{open, PairArg};
+use super::run::{percentiles, Percentiles};
+
+/// Arguments of `semloc bench`.
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Dataset folder (as for `semloc info`).
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+    /// Odometry sequence number.
+    #[arg(long, value_name = "XX", conflicts_with = "drive")]
+    pub seq: Option<String>,
+    /// Raw drive, as `2011_09_26_0005`.
+    #[arg(long, value_name = "DATE_NNNN")]
+    pub drive: Option<String>,
+    /// Stereo pair (default grey when present).
+    #[arg(long, value_enum)]
+    pub pair: Option<PairArg>,
+    /// Frames to time (from the start of the sequence), loaded into memory first so disk and
+    /// PNG decoding are not timed.
+    #[arg(long, default_value_t = 40, value_name = "N")]
+    pub frames: usize,
+    /// Passes over the frames for the ORB-only comparison.
+    #[arg(long, default_value_t = 3, value_name = "R")]
+    pub repeat: usize,
+    /// Python interpreter with opencv-python for the OpenCV ORB reference.
+    #[arg(long, default_value = "python3", value_name = "PYTHON")]
+    pub python: String,
+    /// Skip the OpenCV reference.
+    #[arg(long)]
+    pub no_opencv: bool,
+    /// Also write the figures as JSON here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct BenchReport {
+    frames: usize,
+    image_size: (u32, u32),
+    orb_semloc_1thread: Percentiles,
+    orb_opencv_1thread: Option<serde_json::Value>,
+    orb_ratio_semloc_over_opencv: Option<f64>,
+    pipeline_1thread: std::collections::BTreeMap<&'static str, Percentiles>,
+    pipeline_2threads: std::collections::BTreeMap<&'static str, Percentiles>,
+    wall_ratio_2_over_1_threads: f64,
+}
+
+/// Runs `semloc bench`.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
+    let n = args.frames.min(seq.len());
+    if n == 0 {
+        bail!("{}: no frames to time", seq.root.display());
+    }
+    let pb = super::progress(n as u64, "loading");
+    let mut frames: Vec<(GrayImage, GrayImage)> = Vec::with_capacity(n);
+    for i in 0..n {
+        frames.push(seq.load_luma(i)?);
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let (w, h) = seq.image_size;
+
+    // ORB alone, one thread, left images.
+    let repeat = args.repeat.max(1);
+    let lefts: Vec<GrayImage> = frames.iter().map(|f| f.0.clone()).collect();
+    let orb_ms = std::thread::Builder::new()
+        .stack_size(BIG_STACK_BYTES)
+        .spawn(move || -> Result<Vec<f64>> {
+            let mut ex = Box::new(KittiOrbExtractor::new());
+            ex.configure(OrbConfig::KITTI)?;
+            let mut times = Vec::new();
+            for _ in 0..repeat {
+                for img in &lefts {
+                    let view = ImageView::from_slice(
+                        img.as_raw(),
+                        img.width() as usize,
+                        img.height() as usize,
+                    )?;
+                    let t = Instant::now();
+                    ex.extract(&view)?;
+                    times.push(t.elapsed().as_secs_f64() * 1e3);
+                }
+            }
+            Ok(times)
+        })?
+        .join()
+        .map_err(|_| anyhow::anyhow!("ORB timing thread panicked"))??;
+    let orb = percentiles(&orb_ms);
+
+    let opencv = if args.no_opencv { None } else { opencv_reference(args, &frames, repeat)? };
+    let ratio = opencv.as_ref().and_then(|v| v["median_ms"].as_f64()).map(|cv| orb.median_ms / cv);
+
+    // Whole pipeline: one thread (reference) then two, same frames, fresh tracker each.
+    let one = pipeline_times(&seq, &frames, w, h, 1)?;
+    let two = pipeline_times(&seq, &frames, w, h, 2)?;
+    let stage_table = |outs: &[FrameOutput]| {
+        let col = |f: fn(&FrameOutput) -> f64| -> Vec<f64> { outs.iter().map(f).collect() };
+        let mut m = std::collections::BTreeMap::new();
+        m.insert("orb_left", percentiles(&col(|o| o.times.orb_left_ms)));
+        m.insert("orb_right", percentiles(&col(|o| o.times.orb_right_ms)));
+        m.insert("extract_wall", percentiles(&col(|o| o.times.extract_wall_ms)));
+        m.insert("stereo", percentiles(&col(|o| o.times.stereo_ms)));
+        m.insert("track", percentiles(&col(|o| o.times.track_ms)));
+        m.insert("frame", percentiles(&col(|o| o.times.compute_ms)));
+        m
+    };
+    let (t1, t2) = (stage_table(&one), stage_table(&two));
+    let wall_ratio = t2["frame"].median_ms / t1["frame"].median_ms;
+    let report = BenchReport {
+        frames: n,
+        image_size: (w, h),
+        orb_semloc_1thread: orb,
+        orb_opencv_1thread: opencv,
+        orb_ratio_semloc_over_opencv: ratio,
+        pipeline_1thread: t1,
+        pipeline_2threads: t2,
+        wall_ratio_2_over_1_threads: wall_ratio,
+    };
+    print_report(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn pipeline_times(
+    seq: &semloc::dataset::Sequence,
+    frames: &[(GrayImage, GrayImage)],
+    w: u32,
+    h: u32,
+    threads: usize,
+) -> Result<Vec<FrameOutput>> {
+    let mut p = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), threads)?;
+    let mut outs = Vec::with_capacity(frames.len());
+    for (i, (l, r)) in frames.iter().enumerate() {
+        let ts = seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1);
+        outs.push(p.process_images(l, r, i, ts)?);
+    }
+    Ok(outs)
+}
+
+/// Times OpenCV's ORB on the same luma frames (written as PGM) through the bundled script.
+fn opencv_reference(
+    args: &BenchArgs,
+    frames: &[(GrayImage, GrayImage)],
+    repeat: usize,
+) -> Result<Option<serde_json::Value>> {
+    let dir = tempfile_dir()?;
+    let mut paths = Vec::new();
+    for (i, (l, _)) in frames.iter().enumerate() {
+        let p = dir.join(format!("{i:06}.pgm"));
+        l.save(&p).with_context(|| format!("writing {}", p.display()))?;
+        paths.push(p);
+    }
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("bench").join("orb_opencv.py");
+    let out = std::process::Command::new(&args.python)
+        .arg(&script)
+        .arg(repeat.to_string())
+        .args(&paths)
+        .output();
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = match out {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("OpenCV reference skipped: cannot run {}: {e}", args.python);
+            return Ok(None);
+        }
+    };
+    if out.status.code() == Some(3) {
+        eprintln!(
+            "OpenCV reference skipped: {} (pip install opencv-python-headless)",
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+        return Ok(None);
+    }
+    if !out.status.success() {
+        bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr).trim());
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .with_context(|| format!("parsing the output of {}", script.display()))?;
+    Ok(Some(v))
+}
+
+fn tempfile_dir() -> Result<PathBuf> {
+    let d = std::env::temp_dir().join(format!("semloc-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
+    Ok(d)
+}
+
+fn print_report(r: &BenchReport) {
+    println!("{} frames, {}x{}", r.frames, r.image_size.0, r.image_size.1);
+    println!(
+        "ORB (2000 features, 1 thread): semloc median {:.2} ms, p99 {:.2} ms",
+        r.orb_semloc_1thread.median_ms, r.orb_semloc_1thread.p99_ms
+    );
+    if let (Some(cv), Some(ratio)) = (&r.orb_opencv_1thread, r.orb_ratio_semloc_over_opencv) {
+        println!(
+            "ORB reference: OpenCV {} median {:.2} ms, p99 {:.2} ms -> semloc/OpenCV = {ratio:.2}",
+            cv["opencv"].as_str().unwrap_or("?"),
+            cv["median_ms"].as_f64().unwrap_or(f64::NAN),
+            cv["p99_ms"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    println!(
+        "{:<14}{:>12}{:>10}{:>12}{:>10}",
+        "stage [ms]", "1 thr med", "p99", "2 thr med", "p99"
+    );
+    for (k, a) in &r.pipeline_1thread {
+        let b = r.pipeline_2threads[k];
+        println!(
+            "{k:<14}{:>12.2}{:>10.2}{:>12.2}{:>10.2}",
+            a.median_ms, a.p99_ms, b.median_ms, b.p99_ms
+        );
+    }
+    println!("frame wall time, 2 threads / 1 thread = {:.2}", r.wall_ratio_2_over_1_threads);
+}

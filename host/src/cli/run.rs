@@ -1,0 +1,282 @@
+//! `semloc run`: the tracker on a KITTI sequence, with trajectory, timings, summary and
+//! (when ground truth exists) evaluation and plots.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::Args;
+use semloc::eval::{evaluate, EvalReport};
+use semloc::pipeline::{FrameOutput, Pipeline};
+use semloc_core::geom::Se3;
+use semloc_core::tracker::TrackerParams;
+
+use super::info::{open, PairArg};
+
+/// Arguments of `semloc run`.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// Dataset folder (as for `semloc info`): odometry root with --seq, raw root with --drive,
+    /// or a sequence/drive folder itself.
+    #[arg(value_name = "DATASET")]
+    pub dataset: PathBuf,
+    /// Odometry sequence number, e.g. `00`.
+    #[arg(long, value_name = "XX", conflicts_with = "drive")]
+    pub seq: Option<String>,
+    /// Raw drive, as `2011_09_26_0005` or `2011_09_26_drive_0005_sync`.
+    #[arg(long, value_name = "DATE_NNNN")]
+    pub drive: Option<String>,
+    /// Stereo pair: `grey` (cameras 0/1) or `colour` (2/3, converted to luma). Default: grey
+    /// when present.
+    #[arg(long, value_enum)]
+    pub pair: Option<PairArg>,
+    /// Output folder (created): trajectory.txt (KITTI), trajectory_tum.txt, frames.csv,
+    /// summary.json and, with ground truth, eval.json and plots/.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Process only the first N frames.
+    #[arg(long, value_name = "N")]
+    pub max_frames: Option<usize>,
+    /// Worker threads: 2 extracts the left and right images in parallel (the target has two
+    /// cores); 1 runs everything on one thread. Results are identical either way.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub threads: u8,
+    /// RANSAC hypotheses per frame before pose optimisation (0 turns RANSAC off: the pose is
+    /// then optimised from the constant-velocity prediction only).
+    #[arg(long, default_value_t = TrackerParams::default().ransac_iterations, value_name = "N")]
+    pub ransac_iterations: u32,
+    /// ATE alignment for the evaluation (see `semloc eval --help`).
+    #[arg(long, value_enum, default_value_t = super::eval::AlignArg::Se3)]
+    pub align: super::eval::AlignArg,
+}
+
+/// Median, p90, p99 and max of one timing column.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Percentiles {
+    /// Median (ms).
+    pub median_ms: f64,
+    /// 90th percentile (ms).
+    pub p90_ms: f64,
+    /// 99th percentile (ms).
+    pub p99_ms: f64,
+    /// Maximum (ms).
+    pub max_ms: f64,
+}
+
+/// Nearest-rank percentiles of `v`.
+pub fn percentiles(v: &[f64]) -> Percentiles {
+    if v.is_empty() {
+        return Percentiles::default();
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let at = |q: f64| s[((q * s.len() as f64).ceil() as usize).clamp(1, s.len()) - 1];
+    Percentiles { median_ms: at(0.5), p90_ms: at(0.9), p99_ms: at(0.99), max_ms: at(1.0) }
+}
+
+/// What `summary.json` holds.
+#[derive(Debug, serde::Serialize)]
+struct Summary {
+    dataset: semloc::dataset::DatasetSummary,
+    frames_processed: usize,
+    threads: u8,
+    keyframes: u32,
+    lost: u32,
+    landmark_overflow: u32,
+    core_memory_bytes: usize,
+    median_stereo_matches: f64,
+    median_inliers: f64,
+    timing: std::collections::BTreeMap<&'static str, Percentiles>,
+    eval: Option<EvalSummary>,
+}
+
+#[derive(Debug, serde::Serialize)]
+struct EvalSummary {
+    align: String,
+    ate_rmse_m: f64,
+    t_rel_pct: Option<f64>,
+    r_rel_deg_per_100m: Option<f64>,
+    path_length_m: f64,
+}
+
+/// Everything the run produced so far, so it can be written even when a later frame fails.
+struct Run {
+    poses: Vec<Se3>,
+    stamps: Vec<f64>,
+    outputs: Vec<FrameOutput>,
+}
+
+/// Runs `semloc run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
+    let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output folder {}", args.out.display()))?;
+    let (w, h) = seq.image_size;
+    let params =
+        TrackerParams { ransac_iterations: args.ransac_iterations, ..TrackerParams::default() };
+    let mut pipe = Pipeline::new(&seq.calib, w, h, params, usize::from(args.threads))?;
+    let pb = super::progress(n as u64, "tracking");
+    let mut run = Run { poses: Vec::new(), stamps: Vec::new(), outputs: Vec::new() };
+    let mut failure = None;
+    for i in 0..n {
+        match pipe.process_sequence_frame(&seq, i) {
+            Ok(out) => {
+                run.poses.push(out.report.t_wc);
+                run.stamps.push(seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1));
+                run.outputs.push(out);
+            }
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    // Write what exists before reporting a failure: never lose output already computed.
+    let stats = pipe.tracker().stats();
+    write_outputs(&args.out, &run)?;
+    let gt = seq.gt.as_ref().map(|g| &g[..run.poses.len()]);
+    let eval = match gt {
+        Some(gt) if run.poses.len() >= 3 => {
+            let report = evaluate(gt, &run.poses, args.align.into())
+                .context("evaluating the estimated trajectory")?;
+            let json = args.out.join("eval.json");
+            std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+                .with_context(|| format!("writing {}", json.display()))?;
+            let plots = args.out.join("plots");
+            std::fs::create_dir_all(&plots)
+                .with_context(|| format!("creating {}", plots.display()))?;
+            semloc::plot::write_eval_plots(&plots, gt, &report)?;
+            Some(report)
+        }
+        _ => None,
+    };
+    let summary = summarise(&seq, &run, args, &stats, eval.as_ref());
+    let path = args.out.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    print_summary(&summary, eval.as_ref(), &args.out);
+    match failure {
+        Some(e) => Err(anyhow::Error::new(e).context(format!(
+            "stopped after {} of {n} frames (outputs so far are in {})",
+            run.poses.len(),
+            args.out.display()
+        ))),
+        None => Ok(()),
+    }
+}
+
+fn write_outputs(out: &Path, run: &Run) -> Result<()> {
+    let p = out.join("trajectory.txt");
+    semloc::traj::write_kitti(&p, &run.poses)?;
+    let p = out.join("trajectory_tum.txt");
+    let tum: Vec<(f64, Se3)> = run.stamps.iter().copied().zip(run.poses.iter().copied()).collect();
+    semloc::traj::write_tum(&p, &tum)?;
+    let p = out.join("frames.csv");
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(&p).with_context(|| format!("creating {}", p.display()))?,
+    );
+    writeln!(
+        f,
+        "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,extract_wall_ms,stereo_ms,track_ms,\
+         compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,initialised,landmarks,\
+         keyframes,ba_iterations"
+    )?;
+    for (o, t) in run.outputs.iter().zip(&run.stamps) {
+        let (s, r) = (o.times, o.report);
+        writeln!(
+            f,
+            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{}",
+            r.frame_index,
+            s.load_ms,
+            s.orb_left_ms,
+            s.orb_right_ms,
+            s.extract_wall_ms,
+            s.stereo_ms,
+            s.track_ms,
+            s.compute_ms,
+            s.total_ms,
+            o.stereo.matched,
+            r.matched,
+            r.inliers,
+            u8::from(r.keyframe),
+            u8::from(r.lost),
+            u8::from(r.initialised),
+            r.landmarks,
+            r.keyframes,
+            r.ba_iterations
+        )?;
+    }
+    f.flush().with_context(|| format!("writing {}", p.display()))?;
+    Ok(())
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn summarise(
+    seq: &semloc::dataset::Sequence,
+    run: &Run,
+    args: &RunArgs,
+    stats: &semloc_core::tracker::TrackerStats,
+    eval: Option<&EvalReport>,
+) -> Summary {
+    let col = |f: fn(&FrameOutput) -> f64| -> Vec<f64> { run.outputs.iter().map(f).collect() };
+    let mut timing = std::collections::BTreeMap::new();
+    timing.insert("load", percentiles(&col(|o| o.times.load_ms)));
+    timing.insert("orb_left", percentiles(&col(|o| o.times.orb_left_ms)));
+    timing.insert("orb_right", percentiles(&col(|o| o.times.orb_right_ms)));
+    timing.insert("extract_wall", percentiles(&col(|o| o.times.extract_wall_ms)));
+    timing.insert("stereo", percentiles(&col(|o| o.times.stereo_ms)));
+    timing.insert("track", percentiles(&col(|o| o.times.track_ms)));
+    timing.insert("compute", percentiles(&col(|o| o.times.compute_ms)));
+    timing.insert("total", percentiles(&col(|o| o.times.total_ms)));
+    Summary {
+        dataset: seq.summary(),
+        frames_processed: run.poses.len(),
+        threads: args.threads,
+        keyframes: stats.keyframes,
+        lost: stats.lost,
+        landmark_overflow: stats.landmark_overflow,
+        core_memory_bytes: Pipeline::memory_bytes(),
+        median_stereo_matches: median(col(|o| f64::from(o.stereo.matched))),
+        median_inliers: median(col(|o| f64::from(o.report.inliers))),
+        timing,
+        eval: eval.map(|e| EvalSummary {
+            align: e.align.to_string(),
+            ate_rmse_m: e.ate_rmse_m,
+            t_rel_pct: e.t_rel_pct,
+            r_rel_deg_per_100m: e.r_rel_deg_per_100m,
+            path_length_m: e.path_length_m,
+        }),
+    }
+}
+
+fn print_summary(s: &Summary, eval: Option<&EvalReport>, out: &Path) {
+    println!("{} frames of {} ({} thread(s))", s.frames_processed, s.dataset.name, s.threads);
+    println!(
+        "keyframes {}, lost {}, median stereo matches {:.0}, median inliers {:.0}",
+        s.keyframes, s.lost, s.median_stereo_matches, s.median_inliers
+    );
+    println!("core memory {:.1} MiB", s.core_memory_bytes as f64 / 1048576.0);
+    println!("{:<14}{:>10}{:>10}{:>10}{:>10}", "stage [ms]", "median", "p90", "p99", "max");
+    for (k, p) in &s.timing {
+        println!(
+            "{k:<14}{:>10.2}{:>10.2}{:>10.2}{:>10.2}",
+            p.median_ms, p.p90_ms, p.p99_ms, p.max_ms
+        );
+    }
+    if let Some(e) = eval {
+        println!("{e}");
+    } else {
+        println!("no ground truth: trajectory written, not evaluated");
+    }
+    println!("outputs in {}", out.display());
+}
