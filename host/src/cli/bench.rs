@@ -166,7 +166,7 @@ fn opencv_reference(
     let mut paths = Vec::new();
     for (i, (l, _)) in frames.iter().enumerate() {
         let p = dir.join(format!("{i:06}.pgm"));
-        l.save(&p).with_context(|| format!("writing {}", p.display()))?;
+        write_pgm(&p, l)?;
         paths.push(p);
     }
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("bench").join("orb_opencv.py");
@@ -196,6 +196,13 @@ fn opencv_reference(
     let v: serde_json::Value = serde_json::from_slice(&out.stdout)
         .with_context(|| format!("parsing the output of {}", script.display()))?;
     Ok(Some(v))
+}
+
+/// Binary PGM (P5): lossless, and readable by OpenCV without the image crate's PNM codec.
+fn write_pgm(path: &std::path::Path, img: &GrayImage) -> Result<()> {
+    let mut bytes = format!("P5\n{} {}\n255\n", img.width(), img.height()).into_bytes();
+    bytes.extend_from_slice(img.as_raw());
+    std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
 fn tempfile_dir() -> Result<PathBuf> {
