@@ -164,3 +164,63 @@ fn help_explains_every_flag() {
         assert!(out.contains(flag), "info --help lacks {flag}");
     }
 }
+
+/// A tiny textured odometry sequence (`frames` grey stereo pairs, 320x160) under `root`.
+fn write_textured_sequence(root: &Path, frames: usize) -> std::path::PathBuf {
+    let seq = root.join("sequences").join("00");
+    let tex = |x: u32, y: u32| -> u8 {
+        let (bx, by) = (x / 5, y / 5);
+        let v = (bx.wrapping_mul(2654435761) ^ by.wrapping_mul(40503)).wrapping_mul(2246822519);
+        ((v >> 13) & 0xff) as u8
+    };
+    for (cam, shift) in [("image_0", 0u32), ("image_1", 12)] {
+        std::fs::create_dir_all(seq.join(cam)).unwrap();
+        for i in 0..frames as u32 {
+            let img = image::GrayImage::from_fn(320, 160, |x, y| {
+                image::Luma([tex(x + shift + 2 * i, y)])
+            });
+            img.save(seq.join(cam).join(format!("{i:06}.png"))).unwrap();
+        }
+    }
+    let p0 = "3.0e+02 0 1.6e+02 0 0 3.0e+02 8.0e+01 0 0 0 1 0";
+    let p1 = "3.0e+02 0 1.6e+02 -1.5e+02 0 3.0e+02 8.0e+01 0 0 0 1 0";
+    std::fs::write(seq.join("calib.txt"), format!("P0: {p0}\nP1: {p1}\nP2: {p0}\nP3: {p1}\n"))
+        .unwrap();
+    let times: String = (0..frames).map(|i| format!("{:.1}\n", i as f64 * 0.1)).collect();
+    std::fs::write(seq.join("times.txt"), times).unwrap();
+    seq
+}
+
+#[test]
+fn run_writes_outputs_and_keeps_them_when_a_later_frame_is_corrupt() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = write_textured_sequence(dir.path(), 4);
+    let out = dir.path().join("out");
+    let o = semloc(&["run", seq.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    for f in ["trajectory.txt", "trajectory_tum.txt", "frames.csv", "summary.json"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    assert_eq!(std::fs::read_to_string(out.join("trajectory.txt")).unwrap().lines().count(), 4);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["frames_processed"], 4);
+    assert!(summary["timing"]["compute"]["median_ms"].as_f64().unwrap() > 0.0);
+
+    // Frame 2's left image becomes garbage: the run fails naming it, frames 0-1 are kept.
+    let bad = seq.join("image_0").join("000002.png");
+    std::fs::write(&bad, b"not a png").unwrap();
+    let out2 = dir.path().join("out2");
+    let o = semloc(&["run", seq.to_str().unwrap(), "--out", out2.to_str().unwrap()]);
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("000002.png"), "{err}");
+    assert_eq!(std::fs::read_to_string(out2.join("trajectory.txt")).unwrap().lines().count(), 2);
+}
+
+#[test]
+fn run_rejects_a_bad_thread_count() {
+    let o = semloc(&["run", "/nonexistent", "--out", "/tmp/x", "--threads", "3"]);
+    assert_eq!(o.status.code(), Some(2), "clap usage error");
+}
