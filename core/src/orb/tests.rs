@@ -392,3 +392,150 @@ fn real_kitti_frame() {
     assert!(f.len() >= 1900 && f.len() <= 2000 + 24, "{} features", f.len());
     assert_eq!(f.stats().output_dropped, 0);
 }
+
+/// FNV-1a over every output bit of an extraction: key point fields, descriptors and counters.
+fn fnv1a_features(f: &Features<2048>) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    eat(&(f.len() as u64).to_le_bytes());
+    for (k, d) in f.keypoints().iter().zip(f.descriptors()) {
+        eat(&k.x.to_bits().to_le_bytes());
+        eat(&k.y.to_bits().to_le_bytes());
+        eat(&[k.level]);
+        eat(&k.angle_deg.to_bits().to_le_bytes());
+        eat(&k.response.to_bits().to_le_bytes());
+        eat(&k.size.to_bits().to_le_bytes());
+        eat(&d.0);
+    }
+    let s = f.stats();
+    eat(&[s.n_levels]);
+    eat(&s.output_dropped.to_le_bytes());
+    for l in s.levels() {
+        for v in [l.width, l.height, l.quota, l.cells, l.low_threshold_cells, l.selected] {
+            eat(&v.to_le_bytes());
+        }
+        eat(&l.selection_overflow.to_le_bytes());
+        for v in [l.fast_corners, l.weight_dropped, l.candidates_dropped, l.candidates] {
+            eat(&v.to_le_bytes());
+        }
+    }
+    h
+}
+
+/// Uniform 8-bit noise: a corner at almost every pixel, so candidate storage overflows.
+fn noise_frame(w: usize, h: usize, seed: u32) -> Vec<u8> {
+    let mut rng = Rng(seed | 1);
+    (0..w * h).map(|_| (rng.next() >> 24) as u8).collect()
+}
+
+/// Golden hashes of the extraction output, pinned from the reference implementation: any
+/// optimisation must leave every key point and descriptor bit-identical. A changed hash means a
+/// behaviour change, not a test to update.
+#[test]
+fn golden_output_is_unchanged() {
+    let cases: Vec<(&str, OrbConfig, usize, usize, Vec<u8>, bool, u64)> = vec![
+        (
+            "textured 640x480 #7",
+            OrbConfig::KITTI,
+            640,
+            480,
+            textured(640, 480, 7),
+            false,
+            0x9205faadfb517f1c,
+        ),
+        (
+            "textured 601x397 #3, 1000 area",
+            OrbConfig { n_features: 1000, quota_rule: QuotaRule::Area, ..OrbConfig::KITTI },
+            601,
+            397,
+            textured(601, 397, 3),
+            false,
+            0xc54d8aec9db96dcf,
+        ),
+        (
+            "textured 333x217 #9, 1.3x6 t30/10",
+            OrbConfig {
+                n_features: 700,
+                scale_factor: 1.3,
+                n_levels: 6,
+                ini_th_fast: 30,
+                min_th_fast: 10,
+                ..OrbConfig::KITTI
+            },
+            333,
+            217,
+            textured(333, 217, 9),
+            false,
+            0x9f38f43aedafbad5,
+        ),
+        (
+            "noise 640x480",
+            OrbConfig::KITTI,
+            640,
+            480,
+            noise_frame(640, 480, 77),
+            false,
+            0x369112557e0ac120,
+        ),
+        (
+            "textured 640x480 #5 weighted",
+            OrbConfig::KITTI,
+            640,
+            480,
+            textured(640, 480, 5),
+            true,
+            0xd333920f542f5d66,
+        ),
+    ];
+    let mut got = Vec::new();
+    with_ext(|ext| {
+        for (name, cfg, w, h, img, weighted, _) in &cases {
+            ext.configure(*cfg).unwrap();
+            let v = ImageView::from_slice(img, *w, *h).unwrap();
+            let f = if *weighted {
+                let wm = FnWeights(|x: f32, y: f32| {
+                    if x < 200.0 {
+                        0.0
+                    } else {
+                        0.25 + ((x as u32 * 7 + y as u32 * 3) % 16) as f32 / 16.0
+                    }
+                });
+                ext.extract_weighted(&v, &wm).unwrap()
+            } else {
+                ext.extract(&v).unwrap()
+            };
+            let hash = fnv1a_features(f);
+            let dropped: u32 = f.stats().levels().iter().map(|l| l.candidates_dropped).sum();
+            println!(
+                "{name}: {} features, {dropped} candidates dropped, hash {hash:#018x}",
+                f.len()
+            );
+            got.push(hash);
+        }
+    });
+    let expect: Vec<u64> = cases.iter().map(|c| c.6).collect();
+    assert_eq!(got, expect);
+
+    if let Some((w, h, img)) = kitti_frame() {
+        let mut ext = KITTI_EXT.lock().unwrap_or_else(|e| e.into_inner());
+        ext.configure(OrbConfig::KITTI).unwrap();
+        let v = ImageView::from_slice(&img, w, h).unwrap();
+        let hash = fnv1a_features(ext.extract(&v).unwrap());
+        println!("KITTI {w}x{h}: hash {hash:#018x}");
+        assert_eq!(hash, 0x37d755df075230e8);
+        // The same frame shifted into a wider, odd-sized crop exercises other level sizes.
+        let (cw, ch) = (1111usize, 333usize);
+        let crop: Vec<u8> = (0..cw * ch).map(|i| img[(i / cw + 20) * w + i % cw + 61]).collect();
+        let cv = ImageView::from_slice(&crop, cw, ch).unwrap();
+        let hash = fnv1a_features(ext.extract(&cv).unwrap());
+        println!("KITTI crop {cw}x{ch}: hash {hash:#018x}");
+        assert_eq!(hash, 0x8cfc129b3bf2a290);
+    } else {
+        println!("KITTI frame unavailable: real-frame golden hash skipped");
+    }
+}
