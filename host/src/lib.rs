@@ -9,4 +9,5 @@ pub mod dataset;
 pub mod eval;
 pub mod pipeline;
 pub mod plot;
+pub mod synth;
 pub mod traj;

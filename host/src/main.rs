@@ -30,6 +30,8 @@ enum Command {
     Run(cli::run::RunArgs),
     /// Time the pipeline per stage, against OpenCV's ORB and a one-thread run of itself.
     Bench(cli::bench::BenchArgs),
+    /// Write a synthetic KITTI-layout stereo sequence with traffic, GT poses and labels.
+    Synth(cli::synth::SynthArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -39,6 +41,7 @@ fn main() -> std::process::ExitCode {
         Command::Info(args) => cli::info::run(&args),
         Command::Run(args) => cli::run::run(&args),
         Command::Bench(args) => cli::bench::run(&args),
+        Command::Synth(args) => cli::synth::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod eval;
 pub mod info;
 pub mod run;
+pub mod synth;
 
 /// A bar for work that takes over a second; indicatif hides it when stderr is not a terminal,
 /// so logs and CI output stay clean.
