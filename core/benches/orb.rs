@@ -93,6 +93,21 @@ fn bench(c: &mut Criterion) {
         println!("  level {l}: corners {} selected {}", s.fast_corners, s.selected);
     }
 
+    // `SEMLOC_BENCH_QUICK=N`: N timed extractions, min and median, then the criterion runs (a
+    // quick A/B figure on a loaded machine, where the minimum is the stablest statistic).
+    if let Some(n) = std::env::var("SEMLOC_BENCH_QUICK").ok().and_then(|v| v.parse::<usize>().ok())
+    {
+        let mut ms: Vec<f64> = (0..n.max(1))
+            .map(|_| {
+                let t = std::time::Instant::now();
+                black_box(ext.extract(black_box(&frame)).expect("extract").len());
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        ms.sort_by(f64::total_cmp);
+        println!("quick: {n} extractions, min {:.3} ms, median {:.3} ms", ms[0], ms[ms.len() / 2]);
+    }
+
     c.bench_function(&format!("orb_extract_{w}x{h}_{source}"), |b| {
         b.iter(|| black_box(ext.extract(black_box(&frame)).expect("extract").len()))
     });

@@ -59,6 +59,9 @@ pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
 pub fn ic_angle(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
     let r = HALF_PATCH_SIZE;
     assert!(x >= r && y >= r && x + r < img.width() && y + r < img.height());
+    if x + r + 1 < img.width() {
+        return ic_angle_wide(img, x, y);
+    }
     let centre = img.row(y);
     let mut m10 = 0i32;
     for (u, &p) in (-(r as i32)..=r as i32).zip(&centre[x - r..=x + r]) {
@@ -77,6 +80,75 @@ pub fn ic_angle(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
         }
         m01 += v as i32 * v_sum;
     }
+    angle_deg_of(m01, m10)
+}
+
+/// `u` weights of each row's disc span, 32 columns from `x − 15` (the last one always 0).
+const IC_U: [[i16; 32]; HALF_PATCH_SIZE + 1] = {
+    let mut t = [[0i16; 32]; HALF_PATCH_SIZE + 1];
+    let mut v = 0;
+    while v <= HALF_PATCH_SIZE {
+        let mut j = 0;
+        while j < 32 {
+            let u = j as i32 - HALF_PATCH_SIZE as i32;
+            if u >= -UMAX[v] && u <= UMAX[v] {
+                t[v][j] = u as i16;
+            }
+            j += 1;
+        }
+        v += 1;
+    }
+    t
+};
+
+/// `v` weights of each row's disc span (row `v` contributes `v·(I(y+v) − I(y−v))` to `m01`).
+const IC_V: [[i16; 32]; HALF_PATCH_SIZE + 1] = {
+    let mut t = [[0i16; 32]; HALF_PATCH_SIZE + 1];
+    let mut v = 0;
+    while v <= HALF_PATCH_SIZE {
+        let mut j = 0;
+        while j < 32 {
+            let u = j as i32 - HALF_PATCH_SIZE as i32;
+            if u >= -UMAX[v] && u <= UMAX[v] {
+                t[v][j] = v as i16;
+            }
+            j += 1;
+        }
+        v += 1;
+    }
+    t
+};
+
+/// [`ic_angle`] with every row read as 32 fixed columns and the disc applied as weight tables:
+/// the same integer moments, in straight-line lane arithmetic (needs one column of margin
+/// more on the right).
+fn ic_angle_wide(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
+    let r = HALF_PATCH_SIZE;
+    let row = |yy: usize| -> &[u8; 32] {
+        let s = &img.row(yy)[x - r..x - r + 32];
+        s.try_into().expect("32 columns")
+    };
+    let c = row(y);
+    let mut a10 = [0i32; 32];
+    let mut a01 = [0i32; 32];
+    for j in 0..32 {
+        a10[j] = i32::from(IC_U[0][j]) * i32::from(c[j]);
+    }
+    for v in 1..=r {
+        let (p, m) = (row(y + v), row(y - v));
+        let (wu, wv) = (&IC_U[v], &IC_V[v]);
+        for j in 0..32 {
+            let (pj, mj) = (i32::from(p[j]), i32::from(m[j]));
+            a10[j] += i32::from(wu[j]) * (pj + mj);
+            a01[j] += i32::from(wv[j]) * (pj - mj);
+        }
+    }
+    let m10: i32 = a10.iter().sum();
+    let m01: i32 = a01.iter().sum();
+    angle_deg_of(m01, m10)
+}
+
+fn angle_deg_of(m01: i32, m10: i32) -> f32 {
     let mut deg = math::atan2f(m01 as f32, m10 as f32) * (180.0 / core::f32::consts::PI);
     if deg < 0.0 {
         deg += 360.0;

@@ -239,45 +239,37 @@ pub fn for_each_nms_max(
     mut f: impl FnMut(usize, usize, u8),
 ) {
     debug_assert!(x0 >= 1 && y0 >= 1 && x1 < scores.width() && y1 < scores.height());
-    const CHUNK: usize = 64;
+    if x1 <= x0 {
+        return;
+    }
     for y in y0..y1 {
         let (up, cur, dn) = (scores.row(y - 1), scores.row(y), scores.row(y + 1));
+        // Corners are a few percent of the pixels: skip empty 8-byte words and test each corner
+        // against its 8 neighbours (most words of a 64-byte chunk would be empty).
         let mut x = x0;
         while x < x1 {
-            let n = (x1 - x).min(CHUNK);
-            if cur[x..x + n].iter().fold(0u8, |a, &v| a | v) == 0 {
-                x += n;
-                continue;
-            }
-            // Vectorised: keep[i] = score > max of the 8 neighbours (a non-corner scores 0, so
-            // it is never kept).
-            let mut keep = [0u8; CHUNK];
-            let (u0, u1, u2) = (&up[x - 1..x - 1 + n], &up[x..x + n], &up[x + 1..x + 1 + n]);
-            let (c0, c1, c2) = (&cur[x - 1..x - 1 + n], &cur[x..x + n], &cur[x + 1..x + 1 + n]);
-            let (d0, d1, d2) = (&dn[x - 1..x - 1 + n], &dn[x..x + n], &dn[x + 1..x + 1 + n]);
-            for (i, k) in keep[..n].iter_mut().enumerate() {
-                let m = u0[i]
-                    .max(u1[i])
-                    .max(u2[i])
-                    .max(c0[i])
-                    .max(c2[i])
-                    .max(d0[i])
-                    .max(d1[i])
-                    .max(d2[i]);
-                *k = u8::from(c1[i] > m);
-            }
-            for (w, word) in keep.chunks_exact(8).enumerate() {
-                if u64::from_ne_bytes([
-                    word[0], word[1], word[2], word[3], word[4], word[5], word[6], word[7],
-                ]) == 0
-                {
-                    continue;
-                }
-                for (j, &k) in word.iter().enumerate() {
-                    if k != 0 {
-                        let i = w * 8 + j;
-                        f(x + i, y, c1[i]);
-                    }
+            let n = (x1 - x).min(8);
+            let mut word = if n == 8 {
+                let w = &cur[x..x + 8];
+                u64::from_le_bytes([w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]])
+            } else {
+                cur[x..x + n].iter().rev().fold(0u64, |a, &v| (a << 8) | u64::from(v))
+            };
+            while word != 0 {
+                let j = (word.trailing_zeros() / 8) as usize;
+                word &= !(0xFFu64 << (8 * j));
+                let xx = x + j;
+                let c = cur[xx];
+                let m = up[xx - 1]
+                    .max(up[xx])
+                    .max(up[xx + 1])
+                    .max(cur[xx - 1])
+                    .max(cur[xx + 1])
+                    .max(dn[xx - 1])
+                    .max(dn[xx])
+                    .max(dn[xx + 1]);
+                if c > m {
+                    f(xx, y, c);
                 }
             }
             x += n;

@@ -433,12 +433,15 @@ fn noise_frame(w: usize, h: usize, seed: u32) -> Vec<u8> {
     (0..w * h).map(|_| (rng.next() >> 24) as u8).collect()
 }
 
+/// Name, configuration, width, height, pixels, weighted, expected hash.
+type GoldenCase = (&'static str, OrbConfig, usize, usize, Vec<u8>, bool, u64);
+
 /// Golden hashes of the extraction output, pinned from the reference implementation: any
 /// optimisation must leave every key point and descriptor bit-identical. A changed hash means a
 /// behaviour change, not a test to update.
 #[test]
 fn golden_output_is_unchanged() {
-    let cases: Vec<(&str, OrbConfig, usize, usize, Vec<u8>, bool, u64)> = vec![
+    let cases: Vec<GoldenCase> = vec![
         (
             "textured 640x480 #7",
             OrbConfig::KITTI,
