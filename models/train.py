@@ -1,0 +1,209 @@
+#!/usr/bin/env python3
+"""Train Fast-SCNN / Fast-SCNN-Res2Net on CamVid train, select on CamVid val.
+
+  python3 models/train.py --variant res2net --epochs 200 --batch 8 --crop 384x384 --out models/runs/r2
+
+Writes to --out: best.pt (best val mIoU), last.pt, metrics.json (args, per-eval history, best).
+Checkpoints stay out of git (models/.gitignore ignores runs/).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import camvid  # noqa: E402
+from semloc_models import IGNORE_INDEX, NUM_CLASSES, build, count_params  # noqa: E402
+
+
+def parse_hw(s):
+    h, w = s.lower().split("x")
+    return int(h), int(w)
+
+
+def get_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--variant", choices=["res2net", "bottleneck"], default="res2net")
+    p.add_argument("--epochs", type=int, default=200)
+    p.add_argument("--max-iters", type=int, default=0, help="stop after this many iterations (smoke runs)")
+    p.add_argument("--batch", type=int, default=8)
+    p.add_argument("--lr", type=float, default=None, help="default 0.045 (sgd) / 2e-3 (adamw)")
+    p.add_argument("--optim", choices=["sgd", "adamw"], default="sgd")
+    p.add_argument("--wd", type=float, default=None, help="default 4e-5 (sgd) / 1e-2 (adamw)")
+    p.add_argument("--poly-power", type=float, default=0.9)
+    p.add_argument("--warmup-iters", type=int, default=200)
+    p.add_argument("--crop", type=parse_hw, default=(384, 384), help="HxW training crop")
+    p.add_argument("--scale", type=float, nargs=2, default=(0.5, 2.0))
+    p.add_argument("--class-weights", choices=["none", "enet"], default="none",
+                   help="enet: w_c = 1/ln(1.02 + p_c) from train label frequencies")
+    p.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "runs", "default"))
+    p.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto")
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    p.add_argument("--workers", type=int, default=0, help="DataLoader workers")
+    p.add_argument("--limit-images", type=int, default=0, help="use only the first N train images")
+    p.add_argument("--limit-val", type=int, default=0, help="use only the first N val images")
+    p.add_argument("--eval-every", type=int, default=5, help="evaluate on val every K epochs (and at the end)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--amp", action="store_true", help="bf16 autocast on CUDA")
+    p.add_argument("--data", default=camvid.DEFAULT_ROOT)
+    p.add_argument("--resume", default="", help="checkpoint to start from (weights only)")
+    return p.parse_args(argv)
+
+
+def seed_all(seed):
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+    torch.cuda.manual_seed_all(seed)
+
+
+@torch.no_grad()
+def evaluate(model, loader, device, amp=False):
+    model.eval()
+    cm = torch.zeros(NUM_CLASSES, NUM_CLASSES, dtype=torch.int64)
+    for x, y in loader:
+        x = x.to(device)
+        with torch.autocast("cuda", dtype=torch.bfloat16, enabled=amp and device.type == "cuda"):
+            logits = model(x)
+        pred = logits.float().argmax(1).cpu()
+        cm += camvid.confusion(pred, y)
+    model.train()
+    return cm
+
+
+def main(argv=None):
+    a = get_args(argv)
+    torch.set_num_threads(a.threads)
+    seed_all(a.seed)
+    if a.device == "auto":
+        device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    else:
+        device = torch.device(a.device)
+    if device.type == "cuda":
+        torch.backends.cudnn.benchmark = True
+    lr = a.lr if a.lr is not None else (0.045 if a.optim == "sgd" else 2e-3)
+    wd = a.wd if a.wd is not None else (4e-5 if a.optim == "sgd" else 1e-2)
+    os.makedirs(a.out, exist_ok=True)
+
+    train_ds = camvid.CamVid("train", a.data, crop=a.crop, limit=a.limit_images or None,
+                             scale=tuple(a.scale), seed=a.seed)
+    val_ds = camvid.CamVid("val", a.data, limit=a.limit_val or None)
+    g = torch.Generator()
+    g.manual_seed(a.seed)
+    train_dl = torch.utils.data.DataLoader(
+        train_ds, batch_size=a.batch, shuffle=True, drop_last=len(train_ds) >= a.batch,
+        num_workers=a.workers, generator=g, persistent_workers=a.workers > 0,
+        pin_memory=device.type == "cuda")
+    val_dl = torch.utils.data.DataLoader(val_ds, batch_size=4, num_workers=a.workers)
+
+    model = build(a.variant).to(device)
+    if a.resume:
+        model.load_state_dict(torch.load(a.resume, map_location="cpu")["model"])
+    nparams = count_params(model)
+    print(f"variant={a.variant} params={nparams:,} device={device} train={len(train_ds)} val={len(val_ds)}",
+          flush=True)
+
+    weight = None
+    if a.class_weights == "enet":
+        freq = camvid.class_frequencies(train_ds)
+        weight = torch.tensor(1.0 / np.log(1.02 + freq), dtype=torch.float32, device=device)
+        print("class weights", [round(float(w), 2) for w in weight], flush=True)
+
+    decay, no_decay = [], []
+    for n, p_ in model.named_parameters():
+        (no_decay if p_.ndim <= 1 else decay).append(p_)
+    groups = [{"params": decay, "weight_decay": wd}, {"params": no_decay, "weight_decay": 0.0}]
+    if a.optim == "sgd":
+        opt = torch.optim.SGD(groups, lr=lr, momentum=0.9, nesterov=True)
+    else:
+        opt = torch.optim.AdamW(groups, lr=lr)
+
+    iters_per_epoch = max(1, len(train_dl))
+    total = a.epochs * iters_per_epoch
+    if a.max_iters:
+        total = min(total, a.max_iters)
+
+    def lr_at(it):
+        w = min(1.0, (it + 1) / a.warmup_iters) if a.warmup_iters else 1.0
+        return lr * w * (1 - it / max(1, total)) ** a.poly_power
+
+    history, best = [], {"miou": -1.0}
+    it, t_start = 0, time.time()
+    iter_times, data_times = [], []
+    done = False
+    for epoch in range(a.epochs):
+        train_ds.set_epoch(epoch)
+        run_loss, n_b = 0.0, 0
+        t_data = time.time()
+        for x, y in train_dl:
+            t0 = time.time()
+            data_times.append(t0 - t_data)
+            for gr in opt.param_groups:
+                gr["lr"] = lr_at(it)
+            x, y = x.to(device, non_blocking=True), y.to(device, non_blocking=True)
+            with torch.autocast("cuda", dtype=torch.bfloat16, enabled=a.amp and device.type == "cuda"):
+                logits = model(x)
+            if (y != IGNORE_INDEX).any():
+                loss = F.cross_entropy(logits.float(), y, weight=weight, ignore_index=IGNORE_INDEX)
+            else:  # all-void crop: no gradient (plain CE would be 0/0 = NaN)
+                loss = logits.float().sum() * 0.0
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            if device.type == "cuda":
+                torch.cuda.synchronize()
+            iter_times.append(time.time() - t0)
+            t_data = time.time()
+            run_loss += loss.item()
+            n_b += 1
+            it += 1
+            if it >= total:
+                done = True
+                break
+        last_epoch = done or epoch == a.epochs - 1
+        msg = (f"epoch {epoch + 1}/{a.epochs} it {it} loss {run_loss / max(1, n_b):.4f} "
+               f"lr {lr_at(max(0, it - 1)):.5f} s/iter {np.mean(iter_times[-n_b:]):.3f} "
+               f"(+data {np.mean(data_times[-n_b:]):.3f}) "
+               f"elapsed {time.time() - t_start:.0f}s")
+        print(msg, flush=True)
+        if (epoch + 1) % a.eval_every == 0 or last_epoch:
+            cm = evaluate(model, val_dl, device, a.amp)
+            m = camvid.metrics(cm)
+            m.update(epoch=epoch + 1, iter=it, loss=run_loss / max(1, n_b), elapsed_s=time.time() - t_start)
+            history.append(m)
+            print(f"  val mIoU {m['miou'] * 100:.2f}  category mIoU {m['cat_miou'] * 100:.2f}  "
+                  f"pixel acc {m['pixel_acc'] * 100:.2f}", flush=True)
+            ckpt = {"model": model.state_dict(), "variant": a.variant, "epoch": epoch + 1, "iter": it,
+                    "metrics": m, "args": {k: v for k, v in vars(a).items()}}
+            torch.save(ckpt, os.path.join(a.out, "last.pt"))
+            if m["miou"] > best["miou"]:
+                best = m
+                torch.save(ckpt, os.path.join(a.out, "best.pt"))
+        summary = {
+            "variant": a.variant, "params": nparams, "device": str(device), "threads": a.threads,
+            "args": vars(a), "iters": it, "iters_per_epoch": iters_per_epoch,
+            "mean_s_per_iter": float(np.mean(iter_times[1:] if len(iter_times) > 1 else iter_times)),
+            "mean_data_s_per_iter": float(np.mean(data_times[1:] if len(data_times) > 1 else data_times)),
+            "elapsed_s": time.time() - t_start, "history": history, "best": best,
+        }
+        with open(os.path.join(a.out, "metrics.json"), "w") as f:
+            json.dump(summary, f, indent=1, default=str)
+        if done:
+            break
+    print(f"best val mIoU {best['miou'] * 100:.2f} (category {best.get('cat_miou', float('nan')) * 100:.2f}) "
+          f"in {time.time() - t_start:.0f}s; {a.out}/metrics.json", flush=True)
+    return summary
+
+
+if __name__ == "__main__":
+    main()
