@@ -25,5 +25,6 @@ pub mod math;
 pub mod optim;
 pub mod orb;
 pub mod ransac;
+pub mod seg;
 pub mod stereo;
 pub mod tracker;

@@ -57,7 +57,7 @@ pub fn rigid_from_points(p: &[Vector3<f64>], q: &[Vector3<f64>]) -> Option<Se3> 
     let (u, v_t) = (svd.u?, svd.v_t?);
     // Rank check: the second singular value vanishes for collinear points.
     let mut s = svd.singular_values;
-    s.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    s.as_mut_slice().sort_unstable_by(|a, b| b.total_cmp(a));
     // `partial_cmp` so a NaN singular value also counts as degenerate.
     if s[1].partial_cmp(&(1e-9 * s[0].max(1e-300))) != Some(core::cmp::Ordering::Greater) {
         return None;

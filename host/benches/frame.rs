@@ -1,3 +1,4 @@
+#![allow(missing_docs)] // criterion_group! generates an undocumented pub fn
 //! Criterion bench of one whole frame (ORB on both images, stereo matching, tracking) on real
 //! KITTI raw frames, with one and with two threads, so the figures are read as a ratio in the
 //! same run. The tracker first processes 10 frames so the map is in its steady state; each

@@ -13,7 +13,9 @@ use std::time::Instant;
 use image::GrayImage;
 use semloc_core::frame::Frame;
 use semloc_core::image::ImageView;
-use semloc_core::orb::{KittiOrbExtractor, OrbConfig, OrbError};
+use semloc_core::image::ImageViewMut;
+use semloc_core::orb::{KittiOrbExtractor, NoWeights, OrbConfig, OrbError};
+use semloc_core::seg::{weight_image, WeightScheme};
 use semloc_core::stereo::{KittiStereoMatcher, StereoError, StereoParams, StereoStats};
 use semloc_core::tracker::{FrameReport, Tracker, TrackerError, TrackerParams};
 
@@ -85,6 +87,8 @@ pub struct FrameOutput {
     pub stereo: StereoStats,
     /// Stage timings.
     pub times: StageTimes,
+    /// Left-image FAST candidates dropped by a zero semantic weight (dynamic classes).
+    pub culled: u32,
 }
 
 /// Core state for one stereo sequence.
@@ -98,6 +102,10 @@ pub struct Pipeline {
     /// Worker threads: 1 runs everything on the caller's thread, 2 extracts left and right
     /// in parallel (the deployment setting: the machine has two cores).
     threads: usize,
+    /// Semantic weighting of left-image features, if on.
+    semantics: Option<WeightScheme>,
+    /// Weight image buffer (host side; reused every frame).
+    weights: Vec<u8>,
 }
 
 /// Stack for threads that construct or run core's large fixed-size state.
@@ -139,7 +147,17 @@ impl Pipeline {
             .join()
             .map_err(|_| PipelineError::Worker("constructor thread panicked".into()))??;
         let (left, right, stereo, frame, tracker) = built;
-        Ok(Self { left, right, stereo, frame, tracker, params, threads: threads.clamp(1, 2) })
+        Ok(Self {
+            left,
+            right,
+            stereo,
+            frame,
+            tracker,
+            params,
+            threads: threads.clamp(1, 2),
+            semantics: None,
+            weights: Vec::new(),
+        })
     }
 
     /// Bytes of core state this pipeline holds (extractors, matcher, frame, tracker).
@@ -148,6 +166,12 @@ impl Pipeline {
             + core::mem::size_of::<KittiStereoMatcher>()
             + core::mem::size_of::<Frame>()
             + core::mem::size_of::<Tracker>()
+    }
+
+    /// Weights left-image features by semantic class (labels from the sequence's `semantic/`
+    /// folder, see [`Sequence::load_labels`]); `None` turns it off.
+    pub fn set_semantics(&mut self, scheme: Option<WeightScheme>) {
+        self.semantics = scheme;
     }
 
     /// The tracker (for counters and the window).
@@ -164,18 +188,33 @@ impl Pipeline {
         let t0 = Instant::now();
         let ts = seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1);
         let (left_ex, right_ex) = (&mut self.left, &mut self.right);
-        let side = |ex: &mut KittiOrbExtractor, right: bool| -> Result<(f64, f64), PipelineError> {
+        let (scheme, weights) = (self.semantics, &mut self.weights);
+        let mut left_side = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
             let t = Instant::now();
-            let img = seq.load_luma_side(i, right)?;
+            let img = seq.load_luma_side(i, false)?;
+            let labels = scheme.map(|_| seq.load_labels(i)).transpose()?;
             let load = ms(t);
             let t = Instant::now();
-            extract(ex, &img, i, if right { "right" } else { "left" })?;
+            match (scheme, labels) {
+                (Some(scheme), Some(labels)) => {
+                    extract_weighted(ex, &img, &labels, scheme, weights, i)?
+                }
+                _ => extract(ex, &img, i, "left")?,
+            }
             Ok((load, ms(t)))
         };
-        let ((ll, orb_left_ms), (rl, orb_right_ms), load_ms) = if self.threads >= 2 {
+        let right_side = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
+            let t = Instant::now();
+            let img = seq.load_luma_side(i, true)?;
+            let load = ms(t);
+            let t = Instant::now();
+            extract(ex, &img, i, "right")?;
+            Ok((load, ms(t)))
+        };
+        let ((_, orb_left_ms), (_, orb_right_ms), load_ms) = if self.threads >= 2 {
             let (l, r) = std::thread::scope(|s| {
-                let h = s.spawn(|| side(right_ex, true));
-                let l = side(left_ex, false);
+                let h = s.spawn(|| right_side(right_ex));
+                let l = left_side(left_ex);
                 (l, h.join())
             });
             let l = l?;
@@ -183,11 +222,10 @@ impl Pipeline {
                 r.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))??;
             (l, r, l.0.max(r.0))
         } else {
-            let l = side(left_ex, false)?;
-            let r = side(right_ex, true)?;
+            let l = left_side(left_ex)?;
+            let r = right_side(right_ex)?;
             (l, r, l.0 + r.0)
         };
-        let _ = (ll, rl);
         let extract_wall_ms = ms(t0);
         let (stereo, stereo_ms, report, track_ms) = self.match_and_track(i, ts)?;
         let total_ms = ms(t0);
@@ -201,7 +239,12 @@ impl Pipeline {
             total_ms,
             compute_ms: total_ms - load_ms,
         };
-        Ok(FrameOutput { report, stereo, times })
+        Ok(FrameOutput { report, stereo, times, culled: self.culled() })
+    }
+
+    /// Candidates the left extractor dropped for a zero weight on the last frame.
+    fn culled(&self) -> u32 {
+        self.left.features().stats().levels().iter().map(|l| l.weight_dropped).sum()
     }
 
     /// Processes one stereo pair given as luma images (for callers with images in memory).
@@ -246,7 +289,7 @@ impl Pipeline {
             total_ms,
             compute_ms: total_ms,
         };
-        Ok(FrameOutput { report, stereo, times })
+        Ok(FrameOutput { report, stereo, times, culled: 0 })
     }
 
     fn match_and_track(
@@ -282,7 +325,33 @@ fn extract(
 ) -> Result<(), PipelineError> {
     let view = ImageView::from_slice(img.as_raw(), img.width() as usize, img.height() as usize)
         .map_err(|e| PipelineError::Orb { frame, side, err: e.into() })?;
-    ex.extract(&view).map_err(|err| PipelineError::Orb { frame, side, err })?;
+    ex.extract_weighted(&view, &NoWeights).map_err(|err| PipelineError::Orb {
+        frame,
+        side,
+        err,
+    })?;
+    Ok(())
+}
+
+/// ORB on `img` with the semantic weight image of `labels` (built in `buf`).
+fn extract_weighted(
+    ex: &mut KittiOrbExtractor,
+    img: &GrayImage,
+    labels: &GrayImage,
+    scheme: WeightScheme,
+    buf: &mut Vec<u8>,
+    frame: usize,
+) -> Result<(), PipelineError> {
+    let (w, h) = (labels.width() as usize, labels.height() as usize);
+    buf.resize(w * h, 0);
+    let orb = |err: OrbError| PipelineError::Orb { frame, side: "left", err };
+    let lv = ImageView::from_slice(labels.as_raw(), w, h).map_err(|e| orb(e.into()))?;
+    let mut wv = ImageViewMut::from_slice(buf, w, h).map_err(|e| orb(e.into()))?;
+    weight_image(&lv, scheme, &mut wv).map_err(|e| orb(e.into()))?;
+    let view = ImageView::from_slice(img.as_raw(), img.width() as usize, img.height() as usize)
+        .map_err(|e| orb(e.into()))?;
+    let weights = ImageView::from_slice(buf, w, h).map_err(|e| orb(e.into()))?;
+    ex.extract_weighted(&view, &weights).map_err(orb)?;
     Ok(())
 }
 

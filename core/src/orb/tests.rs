@@ -346,16 +346,20 @@ fn kitti_frame() -> Option<(usize, usize, Vec<u8>)> {
     if let Ok(p) = std::env::var("SEMLOC_KITTI_FRAME") {
         return read_pgm(std::path::Path::new(&p));
     }
-    let png = std::path::Path::new(
-        "/work/shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0005_sync/image_02/data/0000000000.png",
+    // ../shared/data beside the checkout, wherever the checkout is (CI clones elsewhere).
+    let png = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(
+        "../../shared/data/kitti-raw/2011_09_26/2011_09_26_drive_0005_sync/image_02/data/0000000000.png",
     );
+    let png = png.as_path();
     let pgm = std::env::temp_dir().join("semloc_kitti_2011_09_26_0005_0000000000.pgm");
     if !pgm.exists() {
         if !png.exists() {
             return None;
         }
         let script = "import sys; from PIL import Image; Image.open(sys.argv[1]).convert('L').save(sys.argv[2])";
-        let ok = std::process::Command::new("python3")
+        // SEMLOC_PYTHON: an interpreter with Pillow (CI's oracle venv); default python3.
+        let python = std::env::var_os("SEMLOC_PYTHON").unwrap_or_else(|| "python3".into());
+        let ok = std::process::Command::new(python)
             .args(["-c", script])
             .arg(png)
             .arg(&pgm)

@@ -45,9 +45,37 @@ pub struct RunArgs {
     /// then optimised from the constant-velocity prediction only).
     #[arg(long, default_value_t = TrackerParams::default().ransac_iterations, value_name = "N")]
     pub ransac_iterations: u32,
+    /// Semantic weighting of features: `off` (geometric backbone), `cull` (no features on
+    /// dynamic classes), `full` (the paper's semantic ORB: cull dynamic, ×3 construction and
+    /// object classes). Labels come from the sequence's `semantic/` folder (ground-truth labels,
+    /// as `semloc synth` writes them); a sequence without one is an error.
+    #[arg(long, value_enum, default_value_t = SemanticsArg::Off)]
+    pub semantics: SemanticsArg,
     /// ATE alignment for the evaluation (see `semloc eval --help`).
     #[arg(long, value_enum, default_value_t = super::eval::AlignArg::Se3)]
     pub align: super::eval::AlignArg,
+}
+
+/// `--semantics` values.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum SemanticsArg {
+    /// No semantics.
+    Off,
+    /// Cull features on dynamic classes.
+    Cull,
+    /// Cull dynamic classes and weight construction/object classes ×3.
+    Full,
+}
+
+impl SemanticsArg {
+    /// The core weight scheme, if any.
+    pub fn scheme(self) -> Option<semloc_core::seg::WeightScheme> {
+        match self {
+            Self::Off => None,
+            Self::Cull => Some(semloc_core::seg::WeightScheme::Cull),
+            Self::Full => Some(semloc_core::seg::WeightScheme::Full),
+        }
+    }
 }
 
 /// Median, p90, p99 and max of one timing column.
@@ -86,6 +114,8 @@ struct Summary {
     core_memory_bytes: usize,
     median_stereo_matches: f64,
     median_inliers: f64,
+    semantics: String,
+    median_culled: f64,
     timing: std::collections::BTreeMap<&'static str, Percentiles>,
     eval: Option<EvalSummary>,
 }
@@ -116,6 +146,15 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let params =
         TrackerParams { ransac_iterations: args.ransac_iterations, ..TrackerParams::default() };
     let mut pipe = Pipeline::new(&seq.calib, w, h, params, usize::from(args.threads))?;
+    if args.semantics != SemanticsArg::Off && !seq.has_labels() {
+        anyhow::bail!(
+            "--semantics {:?} needs labels: {} does not exist (synthetic sequences from \
+             `semloc synth` have them)",
+            args.semantics,
+            seq.root.join("semantic").display()
+        );
+    }
+    pipe.set_semantics(args.semantics.scheme());
     let pb = super::progress(n as u64, "tracking");
     let mut run = Run { poses: Vec::new(), stamps: Vec::new(), outputs: Vec::new() };
     let mut failure = None;
@@ -182,13 +221,13 @@ fn write_outputs(out: &Path, run: &Run) -> Result<()> {
         f,
         "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,extract_wall_ms,stereo_ms,track_ms,\
          compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,initialised,landmarks,\
-         keyframes,ba_iterations"
+         keyframes,ba_iterations,culled"
     )?;
     for (o, t) in run.outputs.iter().zip(&run.stamps) {
         let (s, r) = (o.times, o.report);
         writeln!(
             f,
-            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{}",
+            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{}",
             r.frame_index,
             s.load_ms,
             s.orb_left_ms,
@@ -206,7 +245,8 @@ fn write_outputs(out: &Path, run: &Run) -> Result<()> {
             u8::from(r.initialised),
             r.landmarks,
             r.keyframes,
-            r.ba_iterations
+            r.ba_iterations,
+            o.culled
         )?;
     }
     f.flush().with_context(|| format!("writing {}", p.display()))?;
@@ -248,6 +288,8 @@ fn summarise(
         core_memory_bytes: Pipeline::memory_bytes(),
         median_stereo_matches: median(col(|o| f64::from(o.stereo.matched))),
         median_inliers: median(col(|o| f64::from(o.report.inliers))),
+        semantics: format!("{:?}", args.semantics).to_lowercase(),
+        median_culled: median(col(|o| f64::from(o.culled))),
         timing,
         eval: eval.map(|e| EvalSummary {
             align: e.align.to_string(),

@@ -315,6 +315,46 @@ impl Sequence {
         Ok(img)
     }
 
+    /// The semantic label image of frame `i`'s left camera, if the sequence has labels:
+    /// `semantic/NAME.png` beside the image folders, named like the left image (the layout
+    /// `semloc synth` writes; 8-bit CamVid class ids, see `semloc_core::seg`).
+    pub fn label_path(&self, i: usize) -> Option<PathBuf> {
+        let name = self.left.get(i)?.file_name()?;
+        Some(self.root.join("semantic").join(name))
+    }
+
+    /// Whether the sequence has a `semantic/` label folder.
+    pub fn has_labels(&self) -> bool {
+        self.root.join("semantic").is_dir()
+    }
+
+    /// Frame `i`'s left-camera labels (8-bit class ids), size-checked.
+    pub fn load_labels(&self, i: usize) -> Result<GrayImage, DatasetError> {
+        let Some(p) = self.label_path(i) else {
+            return Err(DatasetError::FrameOutOfRange {
+                path: self.root.clone(),
+                index: i,
+                frames: self.len(),
+            });
+        };
+        if !p.is_file() {
+            return Err(DatasetError::MissingFile { path: p });
+        }
+        let img = image::open(&p)
+            .map_err(|e| DatasetError::ImageDecode { path: p.clone(), msg: e.to_string() })?;
+        let img = match img {
+            image::DynamicImage::ImageLuma8(g) => g,
+            other => {
+                return Err(DatasetError::ImageDecode {
+                    path: p,
+                    msg: format!("labels must be 8-bit grey class ids, found {:?}", other.color()),
+                })
+            }
+        };
+        self.check_size(&p, &img)?;
+        Ok(img)
+    }
+
     fn check_size(&self, path: &Path, img: &GrayImage) -> Result<(), DatasetError> {
         if img.dimensions() == self.image_size {
             Ok(())
