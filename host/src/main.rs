@@ -28,6 +28,9 @@ enum Command {
     Info(cli::info::InfoArgs),
     /// Run the stereo tracker on a KITTI sequence; write trajectory, timings and evaluation.
     Run(cli::run::RunArgs),
+    /// The main job on an embedded default: a synthetic high-traffic drive tracked without and
+    /// with semantics, side by side.
+    Demo(cli::demo::DemoArgs),
     /// Time the pipeline per stage, against OpenCV's ORB and a one-thread run of itself.
     Bench(cli::bench::BenchArgs),
     /// Write a synthetic KITTI-layout stereo sequence with traffic, GT poses and labels.
@@ -41,6 +44,7 @@ fn main() -> std::process::ExitCode {
         Command::Info(args) => cli::info::run(&args),
         Command::Run(args) => cli::run::run(&args),
         Command::Bench(args) => cli::bench::run(&args),
+        Command::Demo(args) => cli::demo::run(&args),
         Command::Synth(args) => cli::synth::run(&args),
     };
     match result {

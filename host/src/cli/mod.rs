@@ -1,6 +1,7 @@
 //! Subcommands of the `semloc` binary.
 
 pub mod bench;
+pub mod demo;
 pub mod eval;
 pub mod info;
 pub mod run;

@@ -12,6 +12,7 @@ use semloc_core::geom::Se3;
 use semloc_core::tracker::TrackerParams;
 
 use super::info::{open, PairArg};
+use semloc::dataset::Sequence;
 
 /// Arguments of `semloc run`.
 #[derive(Args, Debug)]
@@ -104,29 +105,32 @@ pub fn percentiles(v: &[f64]) -> Percentiles {
 
 /// What `summary.json` holds.
 #[derive(Debug, serde::Serialize)]
-struct Summary {
-    dataset: semloc::dataset::DatasetSummary,
-    frames_processed: usize,
-    threads: u8,
-    keyframes: u32,
-    lost: u32,
-    landmark_overflow: u32,
-    core_memory_bytes: usize,
-    median_stereo_matches: f64,
-    median_inliers: f64,
-    semantics: String,
-    median_culled: f64,
-    timing: std::collections::BTreeMap<&'static str, Percentiles>,
-    eval: Option<EvalSummary>,
+#[allow(missing_docs)] // field names are the JSON keys; see the README
+pub struct Summary {
+    pub dataset: semloc::dataset::DatasetSummary,
+    pub frames_processed: usize,
+    pub threads: u8,
+    pub keyframes: u32,
+    pub lost: u32,
+    pub landmark_overflow: u32,
+    pub core_memory_bytes: usize,
+    pub median_stereo_matches: f64,
+    pub median_inliers: f64,
+    pub semantics: String,
+    pub median_culled: f64,
+    pub timing: std::collections::BTreeMap<&'static str, Percentiles>,
+    pub eval: Option<EvalSummary>,
 }
 
+/// The evaluation figures inside `summary.json`.
 #[derive(Debug, serde::Serialize)]
-struct EvalSummary {
-    align: String,
-    ate_rmse_m: f64,
-    t_rel_pct: Option<f64>,
-    r_rel_deg_per_100m: Option<f64>,
-    path_length_m: f64,
+#[allow(missing_docs)]
+pub struct EvalSummary {
+    pub align: String,
+    pub ate_rmse_m: f64,
+    pub t_rel_pct: Option<f64>,
+    pub r_rel_deg_per_100m: Option<f64>,
+    pub path_length_m: f64,
 }
 
 /// Everything the run produced so far, so it can be written even when a later frame fails.
@@ -136,34 +140,60 @@ struct Run {
     outputs: Vec<FrameOutput>,
 }
 
-/// Runs `semloc run`.
-pub fn run(args: &RunArgs) -> Result<()> {
-    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
-    let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating output folder {}", args.out.display()))?;
+/// How one tracking run is configured (the parts of `semloc run`'s arguments that `semloc
+/// demo` varies).
+#[derive(Clone, Copy, Debug)]
+pub struct RunConfig {
+    /// Worker threads (1 or 2).
+    pub threads: u8,
+    /// RANSAC hypotheses per frame.
+    pub ransac_iterations: u32,
+    /// Semantic weighting.
+    pub semantics: SemanticsArg,
+    /// ATE alignment.
+    pub align: super::eval::AlignArg,
+    /// Frames to process at most.
+    pub max_frames: Option<usize>,
+}
+
+/// What one run produced.
+pub struct RunOutcome {
+    /// The summary written to `summary.json`.
+    pub summary: Summary,
+    /// The evaluation, when the sequence has ground truth.
+    pub eval: Option<EvalReport>,
+    /// The frame that stopped the run early, if one did.
+    pub failure: Option<semloc::pipeline::PipelineError>,
+}
+
+/// Runs the tracker on `seq` with `cfg` and writes every output into `out`; a frame that fails
+/// ends the run but everything computed before it is still written and evaluated.
+pub fn execute(seq: &Sequence, cfg: &RunConfig, out: &Path) -> Result<RunOutcome> {
+    let n = cfg.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("creating output folder {}", out.display()))?;
     let (w, h) = seq.image_size;
     let params =
-        TrackerParams { ransac_iterations: args.ransac_iterations, ..TrackerParams::default() };
-    let mut pipe = Pipeline::new(&seq.calib, w, h, params, usize::from(args.threads))?;
-    if args.semantics != SemanticsArg::Off && !seq.has_labels() {
+        TrackerParams { ransac_iterations: cfg.ransac_iterations, ..TrackerParams::default() };
+    let mut pipe = Pipeline::new(&seq.calib, w, h, params, usize::from(cfg.threads))?;
+    if cfg.semantics != SemanticsArg::Off && !seq.has_labels() {
         anyhow::bail!(
             "--semantics {:?} needs labels: {} does not exist (synthetic sequences from \
              `semloc synth` have them)",
-            args.semantics,
+            cfg.semantics,
             seq.root.join("semantic").display()
         );
     }
-    pipe.set_semantics(args.semantics.scheme());
+    pipe.set_semantics(cfg.semantics.scheme());
     let pb = super::progress(n as u64, "tracking");
     let mut run = Run { poses: Vec::new(), stamps: Vec::new(), outputs: Vec::new() };
     let mut failure = None;
     for i in 0..n {
-        match pipe.process_sequence_frame(&seq, i) {
-            Ok(out) => {
-                run.poses.push(out.report.t_wc);
+        match pipe.process_sequence_frame(seq, i) {
+            Ok(o) => {
+                run.poses.push(o.report.t_wc);
                 run.stamps.push(seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1));
-                run.outputs.push(out);
+                run.outputs.push(o);
             }
             Err(e) => {
                 failure = Some(e);
@@ -175,16 +205,16 @@ pub fn run(args: &RunArgs) -> Result<()> {
     pb.finish_and_clear();
     // Write what exists before reporting a failure: never lose output already computed.
     let stats = pipe.tracker().stats();
-    write_outputs(&args.out, &run)?;
+    write_outputs(out, &run)?;
     let gt = seq.gt.as_ref().map(|g| &g[..run.poses.len()]);
     let eval = match gt {
         Some(gt) if run.poses.len() >= 3 => {
-            let report = evaluate(gt, &run.poses, args.align.into())
+            let report = evaluate(gt, &run.poses, cfg.align.into())
                 .context("evaluating the estimated trajectory")?;
-            let json = args.out.join("eval.json");
+            let json = out.join("eval.json");
             std::fs::write(&json, serde_json::to_string_pretty(&report)?)
                 .with_context(|| format!("writing {}", json.display()))?;
-            let plots = args.out.join("plots");
+            let plots = out.join("plots");
             std::fs::create_dir_all(&plots)
                 .with_context(|| format!("creating {}", plots.display()))?;
             semloc::plot::write_eval_plots(&plots, gt, &report)?;
@@ -192,15 +222,29 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
         _ => None,
     };
-    let summary = summarise(&seq, &run, args, &stats, eval.as_ref());
-    let path = args.out.join("summary.json");
+    let summary = summarise(seq, &run, cfg, &stats, eval.as_ref());
+    let path = out.join("summary.json");
     std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("writing {}", path.display()))?;
-    print_summary(&summary, eval.as_ref(), &args.out);
-    match failure {
+    Ok(RunOutcome { summary, eval, failure })
+}
+
+/// Runs `semloc run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
+    let cfg = RunConfig {
+        threads: args.threads,
+        ransac_iterations: args.ransac_iterations,
+        semantics: args.semantics,
+        align: args.align,
+        max_frames: args.max_frames,
+    };
+    let outcome = execute(&seq, &cfg, &args.out)?;
+    print_summary(&outcome.summary, outcome.eval.as_ref(), &args.out);
+    match outcome.failure {
         Some(e) => Err(anyhow::Error::new(e).context(format!(
-            "stopped after {} of {n} frames (outputs so far are in {})",
-            run.poses.len(),
+            "stopped after {} frames (outputs so far are in {})",
+            outcome.summary.frames_processed,
             args.out.display()
         ))),
         None => Ok(()),
@@ -264,7 +308,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn summarise(
     seq: &semloc::dataset::Sequence,
     run: &Run,
-    args: &RunArgs,
+    cfg: &RunConfig,
     stats: &semloc_core::tracker::TrackerStats,
     eval: Option<&EvalReport>,
 ) -> Summary {
@@ -281,14 +325,14 @@ fn summarise(
     Summary {
         dataset: seq.summary(),
         frames_processed: run.poses.len(),
-        threads: args.threads,
+        threads: cfg.threads,
         keyframes: stats.keyframes,
         lost: stats.lost,
         landmark_overflow: stats.landmark_overflow,
         core_memory_bytes: Pipeline::memory_bytes(),
         median_stereo_matches: median(col(|o| f64::from(o.stereo.matched))),
         median_inliers: median(col(|o| f64::from(o.report.inliers))),
-        semantics: format!("{:?}", args.semantics).to_lowercase(),
+        semantics: format!("{:?}", cfg.semantics).to_lowercase(),
         median_culled: median(col(|o| f64::from(o.culled))),
         timing,
         eval: eval.map(|e| EvalSummary {
