@@ -56,7 +56,9 @@ def get_args(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--amp", action="store_true", help="bf16 autocast on CUDA")
     p.add_argument("--data", default=camvid.DEFAULT_ROOT)
-    p.add_argument("--resume", default="", help="checkpoint to start from (weights only)")
+    p.add_argument("--resume", default="", help="checkpoint to start from: weights, and when it holds "
+                   "them (every last.pt does) the optimiser state, epoch and iteration, so the "
+                   "schedule continues where an interrupted run stopped")
     return p.parse_args(argv)
 
 
@@ -107,8 +109,9 @@ def main(argv=None):
     val_dl = torch.utils.data.DataLoader(val_ds, batch_size=4, num_workers=a.workers)
 
     model = build(a.variant).to(device)
-    if a.resume:
-        model.load_state_dict(torch.load(a.resume, map_location="cpu")["model"])
+    resume = torch.load(a.resume, map_location="cpu") if a.resume else None
+    if resume is not None:
+        model.load_state_dict(resume["model"])
     nparams = count_params(model)
     print(f"variant={a.variant} params={nparams:,} device={device} train={len(train_ds)} val={len(val_ds)}",
           flush=True)
@@ -138,10 +141,15 @@ def main(argv=None):
         return lr * w * (1 - it / max(1, total)) ** a.poly_power
 
     history, best = [], {"miou": -1.0}
-    it, t_start = 0, time.time()
+    it, t_start, start_epoch = 0, time.time(), 0
+    if resume is not None and "opt" in resume:
+        opt.load_state_dict(resume["opt"])
+        start_epoch, it = resume["epoch"], resume["iter"]
+        history, best = resume.get("history", []), resume.get("best", best)
+        print(f"resumed at epoch {start_epoch}, iteration {it}", flush=True)
     iter_times, data_times = [], []
     done = False
-    for epoch in range(a.epochs):
+    for epoch in range(start_epoch, a.epochs):
         train_ds.set_epoch(epoch)
         run_loss, n_b = 0.0, 0
         t_data = time.time()
@@ -183,12 +191,17 @@ def main(argv=None):
             history.append(m)
             print(f"  val mIoU {m['miou'] * 100:.2f}  category mIoU {m['cat_miou'] * 100:.2f}  "
                   f"pixel acc {m['pixel_acc'] * 100:.2f}", flush=True)
-            ckpt = {"model": model.state_dict(), "variant": a.variant, "epoch": epoch + 1, "iter": it,
-                    "metrics": m, "args": {k: v for k, v in vars(a).items()}}
-            torch.save(ckpt, os.path.join(a.out, "last.pt"))
             if m["miou"] > best["miou"]:
                 best = m
+                ckpt = {"model": model.state_dict(), "variant": a.variant, "epoch": epoch + 1,
+                        "iter": it, "metrics": m, "args": {k: v for k, v in vars(a).items()}}
                 torch.save(ckpt, os.path.join(a.out, "best.pt"))
+        # Every epoch: enough to resume an interrupted (e.g. CPU, multi-session) run exactly.
+        state = {"model": model.state_dict(), "opt": opt.state_dict(), "variant": a.variant,
+                 "epoch": epoch + 1, "iter": it, "history": history, "best": best,
+                 "args": {k: v for k, v in vars(a).items()}}
+        torch.save(state, os.path.join(a.out, "last.pt.tmp"))
+        os.replace(os.path.join(a.out, "last.pt.tmp"), os.path.join(a.out, "last.pt"))
         summary = {
             "variant": a.variant, "params": nparams, "device": str(device), "threads": a.threads,
             "args": vars(a), "iters": it, "iters_per_epoch": iters_per_epoch,
