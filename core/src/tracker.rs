@@ -409,13 +409,16 @@ impl Tracker {
         // off); from a RANSAC start its consensus decides.
         let mut first = self.optimise(feats, false);
         if let Some(start) = self.ransac_start(feats, &predicted) {
-            let from_prediction = self.t_cw;
+            let from_prediction = (self.t_cw, self.inlier_coverage(feats));
             self.t_cw = start;
             let from_ransac = self.optimise(feats, true);
-            if from_ransac > first {
+            // The winner is the start whose inliers cover more of the image, not the one with
+            // more inliers: a van or cyclist moving with the camera can supply as many
+            // consistent matches as the static scene, but only from a compact patch of it.
+            if self.inlier_coverage(feats) > from_prediction.1 {
                 first = from_ransac;
             } else {
-                self.t_cw = from_prediction;
+                self.t_cw = from_prediction.0;
             }
         }
         if first < 10 {
@@ -541,6 +544,22 @@ impl Tracker {
         let seed = u64::from(self.frame_index) ^ 0x5e31_0c00_0000_0001;
         let r = ransac_pose(&self.cam, &self.corr, self.params.ransac_iterations, seed)?;
         (r.inliers > count_inliers(&self.cam, predicted, &self.corr)).then_some(r.t_cw)
+    }
+
+    /// Number of cells of a 16x8 image grid holding at least one inlier of the last
+    /// [`Tracker::optimise`] call.
+    fn inlier_coverage(&self, feats: &[Feature]) -> u32 {
+        let mut cells = [false; 128];
+        for (k, &fi) in self.pose_feat[..self.pose_obs.len()].iter().enumerate() {
+            if self.outlier[k] {
+                continue;
+            }
+            let f = &feats[usize::from(fi)];
+            let cx = ((f.x / self.width) * 16.0) as usize;
+            let cy = ((f.y / self.height) * 8.0) as usize;
+            cells[cy.min(7) * 16 + cx.min(15)] = true;
+        }
+        cells.iter().filter(|&&c| c).count() as u32
     }
 
     /// Motion-only optimisation against the current matches; returns the inlier count. With
