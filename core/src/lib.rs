@@ -12,6 +12,8 @@
 //! - [`optim`]: motion-only pose optimisation and sliding-window bundle adjustment.
 //! - [`map`]: the bounded window of keyframes and landmarks.
 //! - [`tracker`]: the per-frame stereo tracker, core's SLAM entry point.
+//! - [`image`], [`orb`], [`stereo`], [`ransac`]: the geometric front end.
+//! - [`seg`], [`semdesc`]: class table, semantic ORB weights and the semantic descriptor.
 //! - [`image`]: luma image views and buffers, bilinear resize, 7×7 Gaussian blur.
 //! - [`orb`]: ORB extraction as ORB-SLAM2's `ORBextractor`, in fixed memory, with a
 //!   semantic weight hook.
@@ -26,5 +28,6 @@ pub mod optim;
 pub mod orb;
 pub mod ransac;
 pub mod seg;
+pub mod semdesc;
 pub mod stereo;
 pub mod tracker;
