@@ -24,6 +24,7 @@ pub mod geom;
 pub mod image;
 pub mod map;
 pub mod math;
+pub mod nn;
 pub mod optim;
 pub mod orb;
 pub mod ransac;

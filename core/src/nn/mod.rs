@@ -1,0 +1,208 @@
+//! # nn: int8 network kernels
+//!
+//! The integer operators the segmentation network (Fast-SCNN / Res2Net variant, see
+//! `models/README.md`) is made of, each as ONNX defines it, quantised as `models/quantise.py`
+//! does: per-tensor asymmetric int8 activations (`real = scale · (q − zero_point)`),
+//! per-output-channel symmetric int8 weights, int32 biases at `input_scale · weight_scale`, and
+//! a `Relu` after a `Conv`/`Add` fused into that op's output clamp.
+//!
+//! Every operator exists twice, as tract does it: a `*_reference` kernel written as plain loops
+//! that read like the ONNX operator definition, and a `*_fast` kernel that restructures the same
+//! integer arithmetic for the compiler's auto-vectoriser (contiguous row slices, hoisted bounds,
+//! `chunks_exact`). One shared test per op runs both on random shapes and inputs and requires
+//! them to be **bit-equal**, and checks the dequantised result against a float computation.
+//!
+//! - [`quant`]: [`Requant`] (Q0.31 multiplier + shift, gemmlowp/TFLite rounding).
+//! - [`conv`]: general `k×k` conv, depthwise 3×3 (stride 1/2, pad 1), pointwise 1×1 (int8 GEMM).
+//! - [`eltwise`]: `Add` (TFLite scheme, left shift 20), `Concat` along channels, `Relu`.
+//! - [`pool`]: the PPM's `AveragePool` (window = stride, bottom/right pad, divide by real pixels).
+//! - [`resize`]: bilinear `Resize`, `half_pixel`, with fixed-point weights.
+//!
+//! **Rounding.** All requantisation is integer: `acc · M · 2^shift` with `M` a Q0.31 multiplier,
+//! rounded as gemmlowp's `SaturatingRoundingDoublingHighMul` + `RoundingDivideByPOT` (both round
+//! half away from zero). No float is touched when a kernel runs, so the int8 outputs are the same
+//! integers on every target; floats are used only to *build* [`Requant`]s from scales (f64, IEEE
+//! exact-rounded, so also identical everywhere).
+//!
+//! **Layout.** Tensors are batch-1 **NHWC** (`index = (y·w + x)·c + ch`) `i8` slices described by
+//! a [`Shape`]. Channels-last makes the two kernels that dominate the network contiguous: a 1×1
+//! conv is a GEMM whose per-pixel input row is one slice (`x[p][..c_in] · w[co][..c_in]`), and a
+//! depthwise conv multiplies whole channel vectors of a pixel by the tap's channel vector of
+//! weights, so both vectorise over channels without gathers. (NCHW would make the depthwise
+//! conv's inner loop a strided 3-tap stencil and the 1×1 conv a strided dot product.)
+//! Weights are `O·kh·kw·I` (TFLite's OHWI) for the general conv, `3·3·C` for depthwise and
+//! `O·I` for pointwise.
+//!
+//! **Memory.** No kernel allocates: inputs, weights and outputs are caller-provided slices, and
+//! the only scratch is a fixed 64-entry `i32` accumulator block on the stack (depthwise). Shapes
+//! and slice lengths are checked once at entry and reported as [`NnError`]; the kernels do not
+//! panic on bad shapes.
+
+use core::fmt;
+
+pub mod conv;
+//pub mod eltwise;
+//pub mod pool;
+pub mod quant;
+//pub mod resize;
+
+pub use quant::Requant;
+
+/// The shape of one batch-1 activation tensor, stored NHWC (channels innermost).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Shape {
+    /// Channels.
+    pub c: usize,
+    /// Height in pixels.
+    pub h: usize,
+    /// Width in pixels.
+    pub w: usize,
+}
+
+impl Shape {
+    /// A shape of `c` channels on an `h × w` map.
+    pub const fn new(c: usize, h: usize, w: usize) -> Self {
+        Self { c, h, w }
+    }
+
+    /// Number of elements, `c·h·w` (saturating, so an absurd shape fails the length check
+    /// rather than wrapping).
+    pub const fn len(&self) -> usize {
+        self.c.saturating_mul(self.h).saturating_mul(self.w)
+    }
+
+    /// True when any dimension is zero.
+    pub const fn is_empty(&self) -> bool {
+        self.c == 0 || self.h == 0 || self.w == 0
+    }
+
+    /// Element index of channel `ch` at pixel `(y, x)` (NHWC); no bounds check.
+    #[inline]
+    pub const fn index(&self, ch: usize, y: usize, x: usize) -> usize {
+        (y * self.w + x) * self.c + ch
+    }
+}
+
+/// Errors of the kernels: all are found by the checks at entry, before anything is written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NnError {
+    /// Two tensors that must agree in shape do not (e.g. the inputs of `Add`).
+    ShapeMismatch {
+        /// The shape required.
+        expected: Shape,
+        /// The shape given.
+        got: Shape,
+    },
+    /// A tensor or parameter slice is shorter than its shape needs.
+    BufferTooSmall {
+        /// Elements needed.
+        need: usize,
+        /// Elements in the slice.
+        got: usize,
+    },
+    /// A parameter slice (weights, bias, requantisers) has the wrong length.
+    ParamLength {
+        /// Elements expected.
+        need: usize,
+        /// Elements given.
+        got: usize,
+    },
+    /// An empty tensor, a zero kernel/stride, an unsupported stride, or a reduction so long
+    /// that the `i32` accumulator could overflow.
+    BadParam,
+}
+
+impl fmt::Display for NnError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            NnError::ShapeMismatch { expected, got } => write!(
+                f,
+                "tensor shape mismatch: expected {}x{}x{} (c x h x w), got {}x{}x{}",
+                expected.c, expected.h, expected.w, got.c, got.h, got.w
+            ),
+            NnError::BufferTooSmall { need, got } => {
+                write!(f, "tensor buffer too small: need {need} elements, got {got}")
+            }
+            NnError::ParamLength { need, got } => {
+                write!(f, "parameter length mismatch: need {need}, got {got}")
+            }
+            NnError::BadParam => write!(f, "unsupported or empty operator parameters"),
+        }
+    }
+}
+
+impl core::error::Error for NnError {}
+
+/// Checks that a tensor slice holds `shape` (and that the shape is not empty).
+pub(crate) fn check_tensor(len: usize, shape: Shape) -> Result<(), NnError> {
+    if shape.is_empty() {
+        return Err(NnError::BadParam);
+    }
+    if len < shape.len() {
+        return Err(NnError::BufferTooSmall { need: shape.len(), got: len });
+    }
+    Ok(())
+}
+
+/// Checks a parameter slice length exactly.
+pub(crate) fn check_param(len: usize, need: usize) -> Result<(), NnError> {
+    if len != need {
+        return Err(NnError::ParamLength { need, got: len });
+    }
+    Ok(())
+}
+
+/// Longest reduction a kernel accepts: `|x − zp| ≤ 255`, `|w| ≤ 127`, so `2^16` products plus a
+/// bias stay far inside `i32` (`255·127·2^16 ≈ 2.1·10^9` is the bound on the product sum alone;
+/// biases in the network are orders of magnitude smaller than that).
+pub const MAX_REDUCTION: usize = 1 << 16;
+
+#[cfg(test)]
+pub(crate) mod testutil {
+    //! Seeded random tensors and float helpers shared by the op tests.
+    use crate::ransac::XorShift64;
+    use std::vec::Vec;
+
+    /// A seeded generator with the helpers the op tests need.
+    pub struct Rng(pub XorShift64);
+
+    impl Rng {
+        pub fn new(seed: u64) -> Self {
+            Self(XorShift64::new(seed))
+        }
+        /// Uniform in `lo..=hi`.
+        pub fn int(&mut self, lo: i64, hi: i64) -> i64 {
+            lo + (self.0.next_u64() % (hi - lo + 1) as u64) as i64
+        }
+        pub fn usize(&mut self, lo: usize, hi: usize) -> usize {
+            self.int(lo as i64, hi as i64) as usize
+        }
+        /// Uniform in `[lo, hi)`.
+        pub fn f64(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * ((self.0.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+        }
+        pub fn i8s(&mut self, n: usize) -> Vec<i8> {
+            (0..n).map(|_| self.int(-128, 127) as i8).collect()
+        }
+        /// Symmetric weights in `[-127, 127]`.
+        pub fn weights(&mut self, n: usize) -> Vec<i8> {
+            (0..n).map(|_| self.int(-127, 127) as i8).collect()
+        }
+        pub fn zp(&mut self) -> i32 {
+            self.int(-128, 127) as i32
+        }
+    }
+
+    /// `clamp(round_half_away(y / scale) + zp, lo, hi)`: what a float engine would store.
+    pub fn quantise(y: f64, scale: f64, zp: i32, lo: i32, hi: i32) -> i32 {
+        ((y / scale).round() as i64 + zp as i64).clamp(lo as i64, hi as i64) as i32
+    }
+
+    /// Largest `|a − b|` over two int8 tensors.
+    pub fn max_diff(a: &[i8], b: &[i32]) -> i32 {
+        a.iter().zip(b).map(|(&x, &y)| (x as i32 - y).abs()).max().unwrap_or(0)
+    }
+}
