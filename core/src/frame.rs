@@ -2,9 +2,12 @@
 //!
 //! A [`Frame`] is what extraction (ORB on both images) and stereo matching hand to the
 //! tracker; it is plain data so the two extractions can run on two threads and the tracker
-//! never sees an image. Memory: [`FRAME_CAPACITY`] features of 56 bytes, 112 KiB a frame.
+//! never sees an image. Memory: [`FRAME_CAPACITY`] features of 56 bytes plus an optional
+//! semantic descriptor each (72 bytes), 256 KiB a frame.
 
 use heapless::Vec;
+
+use crate::semdesc::SemDesc;
 
 /// Most features a frame holds (ORB-SLAM2 extracts 2000 on KITTI; the rest is headroom).
 pub const FRAME_CAPACITY: usize = 2048;
@@ -38,6 +41,8 @@ pub struct Feature {
     pub ur: f32,
     /// Depth (m) from the stereo disparity, or 0 when unmatched.
     pub depth_m: f32,
+    /// Semantic class at the key point ([`crate::seg::VOID`] when no labels were given).
+    pub class: u8,
 }
 
 impl Feature {
@@ -55,12 +60,15 @@ pub struct Frame {
     pub features: Vec<Feature, FRAME_CAPACITY>,
     /// Capture time (s).
     pub timestamp_s: f64,
+    /// Semantic descriptor of each feature that lies on or near a class boundary (index =
+    /// feature index); meaningful only for features whose `class` is not void.
+    pub sem: [Option<SemDesc>; FRAME_CAPACITY],
 }
 
 impl Frame {
     /// An empty frame.
     pub const fn new() -> Self {
-        Self { features: Vec::new(), timestamp_s: 0.0 }
+        Self { features: Vec::new(), timestamp_s: 0.0, sem: [None; FRAME_CAPACITY] }
     }
 
     /// Features that have a stereo depth.

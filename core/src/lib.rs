@@ -19,6 +19,7 @@
 //!   semantic weight hook.
 #![cfg_attr(not(test), no_std)]
 
+pub mod assoc;
 pub mod frame;
 pub mod geom;
 pub mod image;

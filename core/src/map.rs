@@ -14,6 +14,8 @@ use nalgebra::Vector3;
 use crate::frame::{Descriptor, Feature, FRAME_CAPACITY};
 use crate::geom::Se3;
 use crate::optim::MAX_WINDOW;
+use crate::seg::NUM_CLASSES;
+use crate::semdesc::SemDesc;
 
 /// Keyframes in the window (the BA window is the whole window).
 pub const MAX_KEYFRAMES: usize = MAX_WINDOW;
@@ -45,6 +47,11 @@ pub struct Landmark {
     pub last_matched_frame: u32,
     /// Whether the slot is in use.
     pub alive: bool,
+    /// Classes of its keyframe observations (counts, saturating): the class distribution the
+    /// EM association's class term uses.
+    pub class_hist: [u8; NUM_CLASSES],
+    /// Semantic descriptor of its latest keyframe observation on a class boundary.
+    pub sem: Option<SemDesc>,
 }
 
 impl Landmark {
@@ -59,6 +66,8 @@ impl Landmark {
         found: 0,
         last_matched_frame: u32::MAX,
         alive: false,
+        class_hist: [0; NUM_CLASSES],
+        sem: None,
     };
 }
 
@@ -75,6 +84,9 @@ pub struct KeyFrame {
     pub features: Vec<Feature, FRAME_CAPACITY>,
     /// Landmark observed by each feature, or [`NO_LANDMARK`].
     pub landmark: [u32; FRAME_CAPACITY],
+    /// Association weight of each observation (1 for hard association, the E-step weight
+    /// under EM), used by bundle adjustment.
+    pub weight: [f32; FRAME_CAPACITY],
 }
 
 impl KeyFrame {
@@ -85,6 +97,7 @@ impl KeyFrame {
             t_cw: Se3::IDENTITY,
             features: Vec::new(),
             landmark: [NO_LANDMARK; FRAME_CAPACITY],
+            weight: [1.0; FRAME_CAPACITY],
         }
     }
 }
@@ -202,6 +215,7 @@ impl Window {
         // Cannot fail: n ≤ capacity.
         let _ = kf.features.extend_from_slice(&features[..n]);
         kf.landmark.fill(NO_LANDMARK);
+        kf.weight.fill(1.0);
         self.next_kf_id += 1;
         self.order[self.len] = slot as u8;
         self.len += 1;
@@ -249,6 +263,8 @@ impl Window {
             found: 1,
             last_matched_frame: u32::MAX,
             alive: true,
+            class_hist: [0; NUM_CLASSES],
+            sem: None,
         };
         Some(id)
     }
@@ -337,6 +353,7 @@ mod tests {
                 desc: [i as u8; 32],
                 ur: -1.0,
                 depth_m: 0.0,
+                class: crate::seg::VOID,
             })
             .collect()
     }

@@ -348,6 +348,7 @@ impl<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize>
                 desc: dl.0,
                 ur: -1.0,
                 depth_m: 0.0,
+                class: crate::seg::VOID,
             };
             let level = usize::from(kl.level);
             let (u_l, v_l) = (kl.x, kl.y);

@@ -106,6 +106,8 @@ pub struct Pipeline {
     semantics: Option<WeightScheme>,
     /// Weight image buffer (host side; reused every frame).
     weights: Vec<u8>,
+    /// The current frame's left labels, when semantics are on.
+    labels: Option<GrayImage>,
 }
 
 /// Stack for threads that construct or run core's large fixed-size state.
@@ -157,6 +159,7 @@ impl Pipeline {
             threads: threads.clamp(1, 2),
             semantics: None,
             weights: Vec::new(),
+            labels: None,
         })
     }
 
@@ -188,16 +191,16 @@ impl Pipeline {
         let t0 = Instant::now();
         let ts = seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1);
         let (left_ex, right_ex) = (&mut self.left, &mut self.right);
-        let (scheme, weights) = (self.semantics, &mut self.weights);
+        let (scheme, weights, kept) = (self.semantics, &mut self.weights, &mut self.labels);
         let mut left_side = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
             let t = Instant::now();
             let img = seq.load_luma_side(i, false)?;
-            let labels = scheme.map(|_| seq.load_labels(i)).transpose()?;
+            *kept = scheme.map(|_| seq.load_labels(i)).transpose()?;
             let load = ms(t);
             let t = Instant::now();
-            match (scheme, labels) {
+            match (scheme, kept.as_ref()) {
                 (Some(scheme), Some(labels)) => {
-                    extract_weighted(ex, &img, &labels, scheme, weights, i)?
+                    extract_weighted(ex, &img, labels, scheme, weights, i)?
                 }
                 _ => extract(ex, &img, i, "left")?,
             }
@@ -256,6 +259,7 @@ impl Pipeline {
         timestamp_s: f64,
     ) -> Result<FrameOutput, PipelineError> {
         let t0 = Instant::now();
+        self.labels = None;
         let (orb_left_ms, orb_right_ms) = if self.threads >= 2 {
             let (left_ex, right_ex) = (&mut self.left, &mut self.right);
             let (l, r) = std::thread::scope(|s| {
@@ -310,6 +314,13 @@ impl Pipeline {
                 &mut self.frame,
             )
             .map_err(|err| PipelineError::Stereo { frame: index, err })?;
+        if let Some(labels) = &self.labels {
+            // Class and semantic descriptor per feature, for the EM association.
+            let (w, h) = (labels.width() as usize, labels.height() as usize);
+            let lv = ImageView::from_slice(labels.as_raw(), w, h)
+                .map_err(|e| PipelineError::Orb { frame: index, side: "left", err: e.into() })?;
+            semloc_core::assoc::annotate(&mut self.frame, &lv);
+        }
         let stereo_ms = ms(t);
         let t = Instant::now();
         let report = self.tracker.process(&self.frame);

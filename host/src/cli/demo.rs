@@ -73,6 +73,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             threads: 2,
             ransac_iterations: semloc_core::tracker::TrackerParams::default().ransac_iterations,
             semantics: mode,
+            assoc: super::run::AssocArg::Hard,
             align: AlignArg::Se3,
             max_frames: None,
         };

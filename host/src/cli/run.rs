@@ -52,9 +52,32 @@ pub struct RunArgs {
     /// as `semloc synth` writes them); a sequence without one is an error.
     #[arg(long, value_enum, default_value_t = SemanticsArg::Off)]
     pub semantics: SemanticsArg,
+    /// Data association: `hard` (nearest neighbour in descriptor space, ORB-SLAM2) or `em`
+    /// (EM over gated candidates with geometry, ORB, class and semantic-descriptor terms and a
+    /// null hypothesis; class and semantic terms need --semantics).
+    #[arg(long, value_enum, default_value_t = AssocArg::Hard)]
+    pub assoc: AssocArg,
     /// ATE alignment for the evaluation (see `semloc eval --help`).
     #[arg(long, value_enum, default_value_t = super::eval::AlignArg::Se3)]
     pub align: super::eval::AlignArg,
+}
+
+/// `--assoc` values.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AssocArg {
+    /// Nearest neighbour.
+    Hard,
+    /// EM probabilistic association.
+    Em,
+}
+
+impl From<AssocArg> for semloc_core::assoc::Association {
+    fn from(a: AssocArg) -> Self {
+        match a {
+            AssocArg::Hard => Self::Hard,
+            AssocArg::Em => Self::Em,
+        }
+    }
 }
 
 /// `--semantics` values.
@@ -117,7 +140,9 @@ pub struct Summary {
     pub median_stereo_matches: f64,
     pub median_inliers: f64,
     pub semantics: String,
+    pub association: String,
     pub median_culled: f64,
+    pub em_changed_total: u64,
     pub timing: std::collections::BTreeMap<&'static str, Percentiles>,
     pub eval: Option<EvalSummary>,
 }
@@ -150,6 +175,8 @@ pub struct RunConfig {
     pub ransac_iterations: u32,
     /// Semantic weighting.
     pub semantics: SemanticsArg,
+    /// Data association.
+    pub assoc: AssocArg,
     /// ATE alignment.
     pub align: super::eval::AlignArg,
     /// Frames to process at most.
@@ -173,8 +200,11 @@ pub fn execute(seq: &Sequence, cfg: &RunConfig, out: &Path) -> Result<RunOutcome
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating output folder {}", out.display()))?;
     let (w, h) = seq.image_size;
-    let params =
-        TrackerParams { ransac_iterations: cfg.ransac_iterations, ..TrackerParams::default() };
+    let params = TrackerParams {
+        ransac_iterations: cfg.ransac_iterations,
+        association: cfg.assoc.into(),
+        ..TrackerParams::default()
+    };
     let mut pipe = Pipeline::new(&seq.calib, w, h, params, usize::from(cfg.threads))?;
     if cfg.semantics != SemanticsArg::Off && !seq.has_labels() {
         anyhow::bail!(
@@ -236,6 +266,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         threads: args.threads,
         ransac_iterations: args.ransac_iterations,
         semantics: args.semantics,
+        assoc: args.assoc,
         align: args.align,
         max_frames: args.max_frames,
     };
@@ -265,13 +296,13 @@ fn write_outputs(out: &Path, run: &Run) -> Result<()> {
         f,
         "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,extract_wall_ms,stereo_ms,track_ms,\
          compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,initialised,landmarks,\
-         keyframes,ba_iterations,culled"
+         keyframes,ba_iterations,culled,em_changed"
     )?;
     for (o, t) in run.outputs.iter().zip(&run.stamps) {
         let (s, r) = (o.times, o.report);
         writeln!(
             f,
-            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{}",
+            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
             r.frame_index,
             s.load_ms,
             s.orb_left_ms,
@@ -290,7 +321,8 @@ fn write_outputs(out: &Path, run: &Run) -> Result<()> {
             r.landmarks,
             r.keyframes,
             r.ba_iterations,
-            o.culled
+            o.culled,
+            r.em_changed
         )?;
     }
     f.flush().with_context(|| format!("writing {}", p.display()))?;
@@ -333,6 +365,8 @@ fn summarise(
         median_stereo_matches: median(col(|o| f64::from(o.stereo.matched))),
         median_inliers: median(col(|o| f64::from(o.report.inliers))),
         semantics: format!("{:?}", cfg.semantics).to_lowercase(),
+        association: format!("{:?}", cfg.assoc).to_lowercase(),
+        em_changed_total: run.outputs.iter().map(|o| u64::from(o.report.em_changed)).sum(),
         median_culled: median(col(|o| f64::from(o.culled))),
         timing,
         eval: eval.map(|e| EvalSummary {
