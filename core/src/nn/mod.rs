@@ -41,10 +41,10 @@
 use core::fmt;
 
 pub mod conv;
-//pub mod eltwise;
-//pub mod pool;
+pub mod eltwise;
+pub mod pool;
 pub mod quant;
-//pub mod resize;
+pub mod resize;
 
 pub use quant::Requant;
 

@@ -1,0 +1,388 @@
+//! Element-wise int8 ops: `Add`, `Concat` (channels), `Relu`.
+//!
+//! - **Add** (ONNX `Add`, same shapes, no broadcasting): TFLite's quantised add. Both inputs are
+//!   moved to a common fixed-point domain with 20 fractional bits, each by its own requantiser,
+//!   summed, and the sum requantised to the output:
+//!   ```text
+//!   t = 2·max(s1, s2)
+//!   a = M1((x1 − zp1) << 20),  M1 = s1 / t          (≤ 1/2: a right shift)
+//!   b = M2((x2 − zp2) << 20),  M2 = s2 / t
+//!   y = clamp(zp_out + Mo(a + b), lo, hi),  Mo = t / (2^20 · s_out)
+//!   ```
+//!   `|x − zp| ≤ 255` so the shifted values stay below `2^28`: nothing overflows.
+//! - **Concat** along channels (ONNX `Concat`, `axis = 1` of NCHW = the innermost axis here):
+//!   each input is rescaled to the output's quantisation, `y = clamp(zp_out + M_i(x − zp_i))`
+//!   with `M_i = s_i / s_out`; an input with the output's own parameters is copied.
+//! - **Relu**: `y = clamp(zp_out + M(x − zp_in), max(zp_out, −128), 127)`; with equal in/out
+//!   parameters this is `max(x, zp)`. (After a `Conv` or `Add` the ReLU is fused into that op's
+//!   clamp instead: [`crate::nn::quant::clamp_range`].)
+//!
+//! The fast variants walk whole slices (`zip`, no indexing) and take the copy / `max` shortcut
+//! when a rescale is the identity; the tests require them to equal the index-by-index
+//! references bit for bit. No scratch memory.
+
+use super::quant::{clamp_range, ADD_LEFT_SHIFT};
+use super::{check_tensor, NnError, Requant, Shape};
+
+/// A change of quantisation `(s_in, zp_in) → (s_out, zp_out)`: `y = zp_out + M(x − zp_in)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Rescale {
+    /// Zero point of the input.
+    pub input_zero_point: i32,
+    /// Zero point of the output.
+    pub output_zero_point: i32,
+    /// `s_in / s_out`.
+    pub requant: Requant,
+}
+
+impl Rescale {
+    /// From the two tensors' scales and zero points.
+    pub fn new(s_in: f64, zp_in: i32, s_out: f64, zp_out: i32) -> Self {
+        Self {
+            input_zero_point: zp_in,
+            output_zero_point: zp_out,
+            requant: Requant::from_scale(s_in / s_out),
+        }
+    }
+
+    /// True when the rescale maps every int8 value to itself.
+    pub fn is_identity(&self) -> bool {
+        self.requant == Requant::IDENTITY && self.input_zero_point == self.output_zero_point
+    }
+
+    /// One value, clamped to `[lo, hi]`.
+    #[inline]
+    pub fn apply(&self, x: i8, lo: i32, hi: i32) -> i8 {
+        self.requant.to_i8(x as i32 - self.input_zero_point, self.output_zero_point, lo, hi)
+    }
+}
+
+/// The quantisation of an `Add` (see the module docs for the arithmetic).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AddQuant {
+    /// Zero point of the first input.
+    pub zero_point1: i32,
+    /// Zero point of the second input.
+    pub zero_point2: i32,
+    /// Zero point of the output.
+    pub output_zero_point: i32,
+    /// `s1 / (2·max(s1, s2))`.
+    pub requant1: Requant,
+    /// `s2 / (2·max(s1, s2))`.
+    pub requant2: Requant,
+    /// `2·max(s1, s2) / (2^20 · s_out)`.
+    pub output: Requant,
+    /// Clamp at the output zero point (a fused `Relu`).
+    pub relu: bool,
+}
+
+impl AddQuant {
+    /// TFLite's parameters for inputs `(s1, zp1)`, `(s2, zp2)` and output `(s_out, zp_out)`.
+    pub fn new(s1: f64, zp1: i32, s2: f64, zp2: i32, s_out: f64, zp_out: i32, relu: bool) -> Self {
+        let twice_max = 2.0 * if s1 > s2 { s1 } else { s2 };
+        Self {
+            zero_point1: zp1,
+            zero_point2: zp2,
+            output_zero_point: zp_out,
+            requant1: Requant::from_scale(s1 / twice_max),
+            requant2: Requant::from_scale(s2 / twice_max),
+            output: Requant::from_scale(twice_max / ((1u64 << ADD_LEFT_SHIFT) as f64 * s_out)),
+            relu,
+        }
+    }
+
+    #[inline]
+    fn add(&self, a: i8, b: i8, lo: i32, hi: i32) -> i8 {
+        let a = self.requant1.apply((a as i32 - self.zero_point1) << ADD_LEFT_SHIFT);
+        let b = self.requant2.apply((b as i32 - self.zero_point2) << ADD_LEFT_SHIFT);
+        self.output.to_i8(a + b, self.output_zero_point, lo, hi)
+    }
+}
+
+fn check_add(a: &[i8], b: &[i8], shape: Shape, out: &[i8]) -> Result<(), NnError> {
+    check_tensor(a.len(), shape)?;
+    check_tensor(b.len(), shape)?;
+    check_tensor(out.len(), shape)
+}
+
+/// `Add` of two same-shaped tensors, reference (element by element in NHWC index order).
+pub fn add_reference(
+    a: &[i8],
+    b: &[i8],
+    shape: Shape,
+    q: &AddQuant,
+    out: &mut [i8],
+) -> Result<Shape, NnError> {
+    check_add(a, b, shape, out)?;
+    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
+    for y in 0..shape.h {
+        for x in 0..shape.w {
+            for c in 0..shape.c {
+                let i = shape.index(c, y, x);
+                out[i] = q.add(a[i], b[i], lo, hi);
+            }
+        }
+    }
+    Ok(shape)
+}
+
+/// `Add`, fast: one zipped pass over the three slices.
+pub fn add_fast(
+    a: &[i8],
+    b: &[i8],
+    shape: Shape,
+    q: &AddQuant,
+    out: &mut [i8],
+) -> Result<Shape, NnError> {
+    check_add(a, b, shape, out)?;
+    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
+    let n = shape.len();
+    for ((o, &x), &y) in out[..n].iter_mut().zip(&a[..n]).zip(&b[..n]) {
+        *o = q.add(x, y, lo, hi);
+    }
+    Ok(shape)
+}
+
+/// One input of a channel `Concat`: its data, shape and rescale to the output.
+#[derive(Clone, Copy, Debug)]
+pub struct ConcatInput<'a> {
+    /// The tensor.
+    pub data: &'a [i8],
+    /// Its shape; all inputs share `h` and `w`.
+    pub shape: Shape,
+    /// Its quantisation → the output's.
+    pub rescale: Rescale,
+}
+
+fn check_concat(inputs: &[ConcatInput<'_>], out: &[i8]) -> Result<Shape, NnError> {
+    let first = inputs.first().ok_or(NnError::BadParam)?;
+    let mut c = 0usize;
+    for i in inputs {
+        check_tensor(i.data.len(), i.shape)?;
+        if i.shape.h != first.shape.h || i.shape.w != first.shape.w {
+            let expected = Shape::new(i.shape.c, first.shape.h, first.shape.w);
+            return Err(NnError::ShapeMismatch { expected, got: i.shape });
+        }
+        if i.rescale.output_zero_point != first.rescale.output_zero_point {
+            return Err(NnError::BadParam);
+        }
+        c += i.shape.c;
+    }
+    let os = Shape::new(c, first.shape.h, first.shape.w);
+    check_tensor(out.len(), os)?;
+    Ok(os)
+}
+
+/// `Concat` along channels, reference: every output element from its source element.
+pub fn concat_reference(inputs: &[ConcatInput<'_>], out: &mut [i8]) -> Result<Shape, NnError> {
+    let os = check_concat(inputs, out)?;
+    for y in 0..os.h {
+        for x in 0..os.w {
+            let mut c0 = 0;
+            for i in inputs {
+                for c in 0..i.shape.c {
+                    out[os.index(c0 + c, y, x)] =
+                        i.rescale.apply(i.data[i.shape.index(c, y, x)], -128, 127);
+                }
+                c0 += i.shape.c;
+            }
+        }
+    }
+    Ok(os)
+}
+
+/// `Concat` along channels, fast: per pixel, each input's channel run is copied (identity
+/// rescale) or rescaled as one slice.
+pub fn concat_fast(inputs: &[ConcatInput<'_>], out: &mut [i8]) -> Result<Shape, NnError> {
+    let os = check_concat(inputs, out)?;
+    let mut c0 = 0;
+    for i in inputs {
+        let ci = i.shape.c;
+        let src = i.data[..i.shape.len()].chunks_exact(ci);
+        let dst = out[..os.len()].chunks_exact_mut(os.c);
+        if i.rescale.is_identity() {
+            for (d, s) in dst.zip(src) {
+                d[c0..c0 + ci].copy_from_slice(s);
+            }
+        } else {
+            for (d, s) in dst.zip(src) {
+                for (o, &v) in d[c0..c0 + ci].iter_mut().zip(s) {
+                    *o = i.rescale.apply(v, -128, 127);
+                }
+            }
+        }
+        c0 += ci;
+    }
+    Ok(os)
+}
+
+/// Standalone `Relu` (with a rescale to the output's quantisation), reference.
+pub fn relu_reference(
+    x: &[i8],
+    shape: Shape,
+    r: &Rescale,
+    out: &mut [i8],
+) -> Result<Shape, NnError> {
+    check_tensor(x.len(), shape)?;
+    check_tensor(out.len(), shape)?;
+    let (lo, hi) = clamp_range(r.output_zero_point, true);
+    for y in 0..shape.h {
+        for xx in 0..shape.w {
+            for c in 0..shape.c {
+                let i = shape.index(c, y, xx);
+                out[i] = r.apply(x[i], lo, hi);
+            }
+        }
+    }
+    Ok(shape)
+}
+
+/// Standalone `Relu`, fast: `max(x, zp)` when the rescale is the identity.
+pub fn relu_fast(x: &[i8], shape: Shape, r: &Rescale, out: &mut [i8]) -> Result<Shape, NnError> {
+    check_tensor(x.len(), shape)?;
+    check_tensor(out.len(), shape)?;
+    let (lo, hi) = clamp_range(r.output_zero_point, true);
+    let n = shape.len();
+    if r.is_identity() {
+        let zp = lo as i8;
+        for (o, &v) in out[..n].iter_mut().zip(&x[..n]) {
+            *o = v.max(zp);
+        }
+    } else {
+        for (o, &v) in out[..n].iter_mut().zip(&x[..n]) {
+            *o = r.apply(v, lo, hi);
+        }
+    }
+    Ok(shape)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::testutil::{max_diff, quantise, Rng};
+    use std::vec;
+    use std::vec::Vec;
+
+    fn rand_shape(rng: &mut Rng) -> Shape {
+        Shape::new(rng.usize(1, 9), rng.usize(1, 9), rng.usize(1, 9))
+    }
+
+    #[test]
+    fn add_fast_equals_reference_and_float() {
+        let mut rng = Rng::new(0xadd);
+        for _ in 0..300 {
+            let s = rand_shape(&mut rng);
+            let a = rng.i8s(s.len());
+            let b = rng.i8s(s.len());
+            let (s1, s2) = (rng.f64(0.002, 0.1), rng.f64(0.002, 0.1));
+            let s_out = (s1 + s2) * rng.f64(0.5, 1.5);
+            let (zp1, zp2, zpo) = (rng.zp(), rng.zp(), rng.zp());
+            let relu = rng.int(0, 1) == 1;
+            let q = AddQuant::new(s1, zp1, s2, zp2, s_out, zpo, relu);
+            let mut r = vec![0i8; s.len()];
+            let mut f = vec![1i8; s.len()];
+            assert_eq!(add_reference(&a, &b, s, &q, &mut r), Ok(s));
+            assert_eq!(add_fast(&a, &b, s, &q, &mut f), Ok(s));
+            assert_eq!(r, f);
+            let (lo, hi) = clamp_range(zpo, relu);
+            let e: Vec<i32> = a
+                .iter()
+                .zip(&b)
+                .map(|(&x, &y)| {
+                    let v = (x as i32 - zp1) as f64 * s1 + (y as i32 - zp2) as f64 * s2;
+                    quantise(if relu { v.max(0.0) } else { v }, s_out, zpo, lo, hi)
+                })
+                .collect();
+            assert!(max_diff(&r, &e) <= 1);
+        }
+        let s = Shape::new(2, 2, 2);
+        let q = AddQuant::new(0.1, 0, 0.1, 0, 0.1, 0, false);
+        assert_eq!(
+            add_fast(&[0; 8], &[0; 7], s, &q, &mut [0; 8]),
+            Err(NnError::BufferTooSmall { need: 8, got: 7 })
+        );
+    }
+
+    #[test]
+    fn concat_fast_equals_reference_and_float() {
+        let mut rng = Rng::new(0xcc);
+        for _ in 0..300 {
+            let (h, w) = (rng.usize(1, 8), rng.usize(1, 8));
+            let n = rng.usize(1, 4);
+            let s_out = rng.f64(0.01, 0.1);
+            let zpo = rng.zp();
+            let mut parts = Vec::new();
+            for _ in 0..n {
+                let shape = Shape::new(rng.usize(1, 6), h, w);
+                // half of the inputs share the output's parameters (the copy path)
+                let (s, zp) =
+                    if rng.int(0, 1) == 1 { (s_out, zpo) } else { (rng.f64(0.005, 0.2), rng.zp()) };
+                parts.push((rng.i8s(shape.len()), shape, s, zp));
+            }
+            let inputs: Vec<ConcatInput<'_>> = parts
+                .iter()
+                .map(|(d, shape, s, zp)| ConcatInput {
+                    data: d,
+                    shape: *shape,
+                    rescale: Rescale::new(*s, *zp, s_out, zpo),
+                })
+                .collect();
+            let c: usize = parts.iter().map(|p| p.1.c).sum();
+            let os = Shape::new(c, h, w);
+            let mut r = vec![0i8; os.len()];
+            let mut f = vec![1i8; os.len()];
+            assert_eq!(concat_reference(&inputs, &mut r), Ok(os));
+            assert_eq!(concat_fast(&inputs, &mut f), Ok(os));
+            assert_eq!(r, f);
+            let mut e = vec![0i32; os.len()];
+            for y in 0..h {
+                for x in 0..w {
+                    let mut c0 = 0;
+                    for (d, shape, s, zp) in &parts {
+                        for ch in 0..shape.c {
+                            let v = (d[shape.index(ch, y, x)] as i32 - zp) as f64 * s;
+                            e[os.index(c0 + ch, y, x)] = quantise(v, s_out, zpo, -128, 127);
+                        }
+                        c0 += shape.c;
+                    }
+                }
+            }
+            assert!(max_diff(&r, &e) <= 1);
+        }
+        let a = [0i8; 8];
+        let r = Rescale::new(1.0, 0, 1.0, 0);
+        let bad = [
+            ConcatInput { data: &a, shape: Shape::new(2, 2, 2), rescale: r },
+            ConcatInput { data: &a, shape: Shape::new(2, 1, 4), rescale: r },
+        ];
+        assert!(matches!(concat_fast(&bad, &mut [0; 16]), Err(NnError::ShapeMismatch { .. })));
+        assert_eq!(concat_fast(&[], &mut [0; 16]), Err(NnError::BadParam));
+    }
+
+    #[test]
+    fn relu_fast_equals_reference_and_float() {
+        let mut rng = Rng::new(0x7e1);
+        for i in 0..200 {
+            let s = rand_shape(&mut rng);
+            let x = rng.i8s(s.len());
+            let (s_in, zp_in) = (rng.f64(0.005, 0.1), rng.zp());
+            let (s_out, zp_out) =
+                if i % 2 == 0 { (s_in, zp_in) } else { (rng.f64(0.005, 0.1), rng.zp()) };
+            let rs = Rescale::new(s_in, zp_in, s_out, zp_out);
+            assert_eq!(rs.is_identity(), i % 2 == 0);
+            let mut r = vec![0i8; s.len()];
+            let mut f = vec![1i8; s.len()];
+            assert_eq!(relu_reference(&x, s, &rs, &mut r), Ok(s));
+            assert_eq!(relu_fast(&x, s, &rs, &mut f), Ok(s));
+            assert_eq!(r, f);
+            let (lo, hi) = clamp_range(zp_out, true);
+            let e: Vec<i32> = x
+                .iter()
+                .map(|&v| {
+                    quantise(((v as i32 - zp_in) as f64 * s_in).max(0.0), s_out, zp_out, lo, hi)
+                })
+                .collect();
+            assert!(max_diff(&r, &e) <= 1);
+        }
+    }
+}
