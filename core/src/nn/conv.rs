@@ -24,7 +24,7 @@ use super::{check_param, check_tensor, NnError, Requant, Shape, MAX_REDUCTION};
 /// Quantisation of a conv: zero points, per-output-channel requantisers, fused ReLU.
 #[derive(Clone, Copy, Debug)]
 pub struct ConvQuant<'a> {
-    /// Zero point of the input tensor.
+    /// Zero point of the input tensor, an int8 value (`-128..=127`; checked by the 1×1 conv).
     pub input_zero_point: i32,
     /// Zero point of the output tensor.
     pub output_zero_point: i32,
@@ -145,7 +145,7 @@ fn tap_range(o: usize, stride: usize, pad: usize, k: usize, n: usize) -> (usize,
 }
 
 /// General conv, fast: per output pixel the valid kernel rows are contiguous NHWC runs of
-/// `kw_valid · c_in` bytes in both input and weights, so each is one [`dot`].
+/// `kw_valid · c_in` bytes in both input and weights, so each is one dot product.
 #[allow(clippy::too_many_arguments)]
 pub fn conv2d_fast(
     x: &[i8],
@@ -316,7 +316,8 @@ fn check_pointwise(
 ) -> Result<Shape, NnError> {
     check_tensor(x.len(), xs)?;
     let c_out = b.len();
-    if c_out == 0 || xs.c > MAX_REDUCTION {
+    // the fast kernel stages `x − zp` as i16: a zero point must be an int8 value
+    if c_out == 0 || xs.c > MAX_REDUCTION || !(-128..=127).contains(&q.input_zero_point) {
         return Err(NnError::BadParam);
     }
     let os = Shape::new(c_out, xs.h, xs.w);
@@ -356,11 +357,34 @@ pub fn pointwise_reference(
 
 /// Output channels per register block of the fast pointwise kernel.
 const PW_CO: usize = 4;
+/// Longest input row the fast pointwise kernel stages as `i16` (2 KiB of stack); the network's
+/// widest 1×1 input is 768 channels. Wider rows take the direct path (same integers).
+const PW_STAGE: usize = 1024;
+
+/// Four dot products of one staged input row with four weight rows, in one zipped loop.
+/// `i16 × i8 → i32` with `|x − zp| ≤ 255` is what `pmaddwd` / `smlal` do, and LLVM finds them.
+#[inline]
+fn dot4<T: Copy + Into<i32>>(xr: &[T], w4: &[i8], zp: i32) -> [i32; 4] {
+    let ci = xr.len();
+    let (w0, r) = w4.split_at(ci);
+    let (w1, r) = r.split_at(ci);
+    let (w2, w3) = r.split_at(ci);
+    let (mut a0, mut a1, mut a2, mut a3) = (0i32, 0i32, 0i32, 0i32);
+    for ((((&xv, &v0), &v1), &v2), &v3) in xr.iter().zip(w0).zip(w1).zip(w2).zip(w3) {
+        let xv = xv.into() - zp;
+        a0 += xv * v0 as i32;
+        a1 += xv * v1 as i32;
+        a2 += xv * v2 as i32;
+        a3 += xv * v3 as i32;
+    }
+    [a0, a1, a2, a3]
+}
 
 /// Pointwise 1×1 conv, fast: an int8 GEMM `out[p][co] = Σ_ci (x[p][ci] − zp)·w[co][ci]` with
-/// `i32` accumulation. Per pixel the input row is loaded once for a block of four weight rows
-/// (four independent reductions in one zipped loop, no bounds checks); leftover channels use
-/// a plain [`dot`].
+/// `i32` accumulation. Per pixel the input row is staged once as `i16` with the zero point
+/// subtracted (so the inner loop is a pure widening multiply-add), then multiplied by blocks
+/// of four weight rows (four independent reductions in one zipped loop, no bounds checks);
+/// leftover channels use a plain dot product.
 pub fn pointwise_fast(
     x: &[i8],
     xs: Shape,
@@ -378,25 +402,23 @@ pub fn pointwise_fast(
     let x = &x[..xs.len()];
     let out = &mut out[..os.len()];
     let full = co / PW_CO * PW_CO;
+    let (wblk, wtail) = w.split_at(full * ci);
+    let mut stage = [0i16; PW_STAGE];
     for (xr, orow) in x.chunks_exact(ci).zip(out.chunks_exact_mut(co)) {
         let (oblk, otail) = orow.split_at_mut(full);
-        let (wblk, wtail) = w.split_at(full * ci);
+        let staged = ci <= PW_STAGE;
+        if staged {
+            for (s, &v) in stage[..ci].iter_mut().zip(xr) {
+                *s = v as i16 - zp as i16;
+            }
+        }
+        let xb = &stage[..ci.min(PW_STAGE)];
         for (j, (o4, w4)) in
             oblk.chunks_exact_mut(PW_CO).zip(wblk.chunks_exact(PW_CO * ci)).enumerate()
         {
-            let (w0, r) = w4.split_at(ci);
-            let (w1, r) = r.split_at(ci);
-            let (w2, w3) = r.split_at(ci);
-            let (mut a0, mut a1, mut a2, mut a3) = (0i32, 0i32, 0i32, 0i32);
-            for ((((&xv, &v0), &v1), &v2), &v3) in xr.iter().zip(w0).zip(w1).zip(w2).zip(w3) {
-                let xv = xv as i32 - zp;
-                a0 += xv * v0 as i32;
-                a1 += xv * v1 as i32;
-                a2 += xv * v2 as i32;
-                a3 += xv * v3 as i32;
-            }
+            let acc = if staged { dot4(xb, w4, 0) } else { dot4(xr, w4, zp) };
             let k = j * PW_CO;
-            for (t, (o, a)) in o4.iter_mut().zip([a0, a1, a2, a3]).enumerate() {
+            for (t, (o, a)) in o4.iter_mut().zip(acc).enumerate() {
                 *o = q.requant[k + t].to_i8(a.saturating_add(b[k + t]), zo, lo, hi);
             }
         }
@@ -562,8 +584,11 @@ mod tests {
     #[test]
     fn pointwise_fast_equals_reference_and_float() {
         let mut rng = Rng::new(0x11);
-        for _ in 0..300 {
-            let xs = Shape::new(rng.usize(1, 40), rng.usize(1, 7), rng.usize(1, 7));
+        for i in 0..300 {
+            // a few rows wider than the i16 stage (the direct path)
+            let c_in =
+                if i % 50 == 0 { rng.usize(PW_STAGE - 2, PW_STAGE + 40) } else { rng.usize(1, 40) };
+            let xs = Shape::new(c_in, rng.usize(1, 7), rng.usize(1, 7));
             let c_out = rng.usize(1, 19);
             let x = rng.i8s(xs.len());
             let w = rng.weights(c_out * xs.c);
@@ -596,6 +621,8 @@ mod tests {
             pointwise_fast(&x[..31], xs, &[0; 4], &b, &q, &mut out),
             Err(NnError::BufferTooSmall { need: 32, got: 31 })
         );
+        let bad_zp = ConvQuant { input_zero_point: 128, ..q };
+        assert_eq!(pointwise_fast(&x, xs, &[0; 4], &b, &bad_zp, &mut out), Err(NnError::BadParam));
         assert_eq!(
             pointwise_fast(&x, xs, &[0; 3], &b, &q, &mut out),
             Err(NnError::ParamLength { need: 4, got: 3 })
