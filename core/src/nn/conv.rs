@@ -657,10 +657,15 @@ mod tests {
         let wd = rng.weights(9 * 128);
         let mut r = vec![0i8; xs.len()];
         let mut f = vec![0i8; xs.len()];
+        // best of three: the cores are shared, the minimum is the least disturbed run
         let time = |g: &mut dyn FnMut()| {
-            let t = Instant::now();
-            g();
-            t.elapsed().as_secs_f64()
+            (0..3)
+                .map(|_| {
+                    let t = Instant::now();
+                    g();
+                    t.elapsed().as_secs_f64()
+                })
+                .fold(f64::INFINITY, f64::min)
         };
         let tr = time(&mut || {
             pointwise_reference(&x, xs, &wp, &b, &q.conv(), &mut r).unwrap();
