@@ -161,6 +161,23 @@ pub(crate) fn check_param(len: usize, need: usize) -> Result<(), NnError> {
 pub const MAX_REDUCTION: usize = 1 << 16;
 
 #[cfg(test)]
+mod tests {
+    use super::*;
+    use std::string::ToString;
+
+    #[test]
+    fn errors_display_their_numbers() {
+        let e = NnError::ShapeMismatch { expected: Shape::new(3, 4, 5), got: Shape::new(3, 4, 6) };
+        assert_eq!(e.to_string(), "tensor shape mismatch: expected 3x4x5 (c x h x w), got 3x4x6");
+        let e = NnError::BufferTooSmall { need: 10, got: 9 };
+        assert_eq!(e.to_string(), "tensor buffer too small: need 10 elements, got 9");
+        assert!(NnError::BadParam.to_string().contains("unsupported"));
+        assert_eq!(Shape::new(2, 3, 4).index(1, 2, 3), (2 * 4 + 3) * 2 + 1);
+        assert!(Shape::new(0, 3, 4).is_empty());
+    }
+}
+
+#[cfg(test)]
 pub(crate) mod testutil {
     //! Seeded random tensors and float helpers shared by the op tests.
     use crate::ransac::XorShift64;
