@@ -19,12 +19,12 @@
 //! The depthwise kernel keeps a 64-channel `i32` accumulator block on the stack (256 bytes).
 
 use super::quant::clamp_range;
-use super::{check_param, check_tensor, NnError, Requant, Shape, MAX_REDUCTION};
+use super::{check_param, check_tensor, check_zero_point, NnError, Requant, Shape, MAX_REDUCTION};
 
 /// Quantisation of a conv: zero points, per-output-channel requantisers, fused ReLU.
 #[derive(Clone, Copy, Debug)]
 pub struct ConvQuant<'a> {
-    /// Zero point of the input tensor, an int8 value (`-128..=127`; checked by the 1×1 conv).
+    /// Zero point of the input tensor, an int8 value (`-128..=127`, checked).
     pub input_zero_point: i32,
     /// Zero point of the output tensor.
     pub output_zero_point: i32,
@@ -77,6 +77,7 @@ fn check_conv2d(
     out: &[i8],
 ) -> Result<Shape, NnError> {
     check_tensor(x.len(), xs)?;
+    check_zero_point(q.input_zero_point)?;
     let os = p.output_shape(xs)?;
     let k = p.kernel.0 * p.kernel.1 * xs.c;
     if k > MAX_REDUCTION {
@@ -204,6 +205,7 @@ fn check_depthwise(
     out: &[i8],
 ) -> Result<Shape, NnError> {
     check_tensor(x.len(), xs)?;
+    check_zero_point(q.input_zero_point)?;
     let os = depthwise3x3_output_shape(xs, stride)?;
     check_param(w.len(), 9 * xs.c)?;
     check_param(b.len(), xs.c)?;
@@ -315,9 +317,9 @@ fn check_pointwise(
     out: &[i8],
 ) -> Result<Shape, NnError> {
     check_tensor(x.len(), xs)?;
+    check_zero_point(q.input_zero_point)?;
     let c_out = b.len();
-    // the fast kernel stages `x − zp` as i16: a zero point must be an int8 value
-    if c_out == 0 || xs.c > MAX_REDUCTION || !(-128..=127).contains(&q.input_zero_point) {
+    if c_out == 0 || xs.c > MAX_REDUCTION {
         return Err(NnError::BadParam);
     }
     let os = Shape::new(c_out, xs.h, xs.w);
@@ -623,6 +625,10 @@ mod tests {
         );
         let bad_zp = ConvQuant { input_zero_point: 128, ..q };
         assert_eq!(pointwise_fast(&x, xs, &[0; 4], &b, &bad_zp, &mut out), Err(NnError::BadParam));
+        assert_eq!(
+            depthwise3x3_reference(&x, xs, 1, &[0; 18], &b, &bad_zp, &mut out),
+            Err(NnError::BadParam)
+        );
         assert_eq!(
             pointwise_fast(&x, xs, &[0; 3], &b, &q, &mut out),
             Err(NnError::ParamLength { need: 4, got: 3 })

@@ -22,7 +22,7 @@
 //! references bit for bit. No scratch memory.
 
 use super::quant::{clamp_range, ADD_LEFT_SHIFT};
-use super::{check_tensor, NnError, Requant, Shape};
+use super::{check_tensor, check_zero_point, NnError, Requant, Shape};
 
 /// A change of quantisation `(s_in, zp_in) → (s_out, zp_out)`: `y = zp_out + M(x − zp_in)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,11 +95,13 @@ impl AddQuant {
     fn add(&self, a: i8, b: i8, lo: i32, hi: i32) -> i8 {
         let a = self.requant1.apply((a as i32 - self.zero_point1) << ADD_LEFT_SHIFT);
         let b = self.requant2.apply((b as i32 - self.zero_point2) << ADD_LEFT_SHIFT);
-        self.output.to_i8(a + b, self.output_zero_point, lo, hi)
+        self.output.to_i8(a.saturating_add(b), self.output_zero_point, lo, hi)
     }
 }
 
-fn check_add(a: &[i8], b: &[i8], shape: Shape, out: &[i8]) -> Result<(), NnError> {
+fn check_add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &[i8]) -> Result<(), NnError> {
+    check_zero_point(q.zero_point1)?;
+    check_zero_point(q.zero_point2)?;
     check_tensor(a.len(), shape)?;
     check_tensor(b.len(), shape)?;
     check_tensor(out.len(), shape)
@@ -113,7 +115,7 @@ pub fn add_reference(
     q: &AddQuant,
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
-    check_add(a, b, shape, out)?;
+    check_add(a, b, shape, q, out)?;
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
     for y in 0..shape.h {
         for x in 0..shape.w {
@@ -134,7 +136,7 @@ pub fn add_fast(
     q: &AddQuant,
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
-    check_add(a, b, shape, out)?;
+    check_add(a, b, shape, q, out)?;
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
     let n = shape.len();
     for ((o, &x), &y) in out[..n].iter_mut().zip(&a[..n]).zip(&b[..n]) {
@@ -159,6 +161,7 @@ fn check_concat(inputs: &[ConcatInput<'_>], out: &[i8]) -> Result<Shape, NnError
     let mut c = 0usize;
     for i in inputs {
         check_tensor(i.data.len(), i.shape)?;
+        check_zero_point(i.rescale.input_zero_point)?;
         if i.shape.h != first.shape.h || i.shape.w != first.shape.w {
             let expected = Shape::new(i.shape.c, first.shape.h, first.shape.w);
             return Err(NnError::ShapeMismatch { expected, got: i.shape });
@@ -224,6 +227,7 @@ pub fn relu_reference(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     check_tensor(x.len(), shape)?;
+    check_zero_point(r.input_zero_point)?;
     check_tensor(out.len(), shape)?;
     let (lo, hi) = clamp_range(r.output_zero_point, true);
     for y in 0..shape.h {
@@ -240,6 +244,7 @@ pub fn relu_reference(
 /// Standalone `Relu`, fast: `max(x, zp)` when the rescale is the identity.
 pub fn relu_fast(x: &[i8], shape: Shape, r: &Rescale, out: &mut [i8]) -> Result<Shape, NnError> {
     check_tensor(x.len(), shape)?;
+    check_zero_point(r.input_zero_point)?;
     check_tensor(out.len(), shape)?;
     let (lo, hi) = clamp_range(r.output_zero_point, true);
     let n = shape.len();
@@ -296,6 +301,8 @@ mod tests {
             assert!(max_diff(&r, &e) <= 1);
         }
         let s = Shape::new(2, 2, 2);
+        let bad = AddQuant::new(0.1, 200, 0.1, 0, 0.1, 0, false);
+        assert_eq!(add_reference(&[0; 8], &[0; 8], s, &bad, &mut [0; 8]), Err(NnError::BadParam));
         let q = AddQuant::new(0.1, 0, 0.1, 0, 0.1, 0, false);
         assert_eq!(
             add_fast(&[0; 8], &[0; 7], s, &q, &mut [0; 8]),

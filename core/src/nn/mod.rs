@@ -110,8 +110,8 @@ pub enum NnError {
         /// Elements given.
         got: usize,
     },
-    /// An empty tensor, a zero kernel/stride, an unsupported stride, or a reduction so long
-    /// that the `i32` accumulator could overflow.
+    /// An empty tensor, a zero kernel/stride, an unsupported stride, a zero point outside
+    /// `-128..=127`, or a reduction so long that the `i32` accumulator could overflow.
     BadParam,
 }
 
@@ -143,6 +143,15 @@ pub(crate) fn check_tensor(len: usize, shape: Shape) -> Result<(), NnError> {
     }
     if len < shape.len() {
         return Err(NnError::BufferTooSmall { need: shape.len(), got: len });
+    }
+    Ok(())
+}
+
+/// Checks that a zero point is an int8 value (so `x − zp` fits in `[-255, 255]` and no
+/// arithmetic downstream can overflow).
+pub(crate) fn check_zero_point(zp: i32) -> Result<(), NnError> {
+    if !(-128..=127).contains(&zp) {
+        return Err(NnError::BadParam);
     }
     Ok(())
 }

@@ -17,7 +17,7 @@
 //! The fast kernel accumulates a whole window row of channel vectors into a 64-channel stack
 //! block (256 bytes), which vectorises over channels; the reference loops per element.
 
-use super::{check_tensor, NnError, Requant, Shape};
+use super::{check_tensor, check_zero_point, NnError, Requant, Shape};
 
 /// Fractional bits of the window mean before requantisation.
 pub const AVG_FRAC_BITS: u32 = 16;
@@ -95,8 +95,15 @@ impl PoolQuant {
     }
 }
 
-fn check_pool(x: &[i8], xs: Shape, p: &AvgPoolParams, out: &[i8]) -> Result<Shape, NnError> {
+fn check_pool(
+    x: &[i8],
+    xs: Shape,
+    p: &AvgPoolParams,
+    q: &PoolQuant,
+    out: &[i8],
+) -> Result<Shape, NnError> {
     check_tensor(x.len(), xs)?;
+    check_zero_point(q.input_zero_point)?;
     let os = p.output_shape(xs)?;
     check_tensor(out.len(), os)?;
     Ok(os)
@@ -111,7 +118,7 @@ pub fn avgpool_reference(
     q: &PoolQuant,
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
-    let os = check_pool(x, xs, p, out)?;
+    let os = check_pool(x, xs, p, q, out)?;
     let (kh, kw) = p.kernel;
     for oy in 0..os.h {
         for ox in 0..os.w {
@@ -145,7 +152,7 @@ pub fn avgpool_fast(
     q: &PoolQuant,
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
-    let os = check_pool(x, xs, p, out)?;
+    let os = check_pool(x, xs, p, q, out)?;
     let (kh, kw) = p.kernel;
     let c = xs.c;
     let zp = q.input_zero_point;

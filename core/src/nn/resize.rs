@@ -23,7 +23,7 @@
 //! pixel, and blends whole channel vectors (NHWC) in one zipped loop; the reference recomputes
 //! everything per element. No scratch memory.
 
-use super::{check_tensor, NnError, Requant, Shape};
+use super::{check_tensor, check_zero_point, NnError, Requant, Shape};
 
 /// Fractional bits of the interpolation weights.
 pub const RESIZE_FRAC_BITS: u32 = 11;
@@ -67,8 +67,15 @@ impl ResizeQuant {
     }
 }
 
-fn check_resize(x: &[i8], xs: Shape, size: (usize, usize), out: &[i8]) -> Result<Shape, NnError> {
+fn check_resize(
+    x: &[i8],
+    xs: Shape,
+    size: (usize, usize),
+    q: &ResizeQuant,
+    out: &[i8],
+) -> Result<Shape, NnError> {
     check_tensor(x.len(), xs)?;
+    check_zero_point(q.input_zero_point)?;
     let os = Shape::new(xs.c, size.0, size.1);
     check_tensor(out.len(), os)?;
     Ok(os)
@@ -87,7 +94,7 @@ pub fn resize_bilinear_reference(
     q: &ResizeQuant,
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
-    let os = check_resize(x, xs, size, out)?;
+    let os = check_resize(x, xs, size, q, out)?;
     let zp = q.input_zero_point;
     for oy in 0..os.h {
         for ox in 0..os.w {
@@ -111,7 +118,7 @@ pub fn resize_bilinear_fast(
     q: &ResizeQuant,
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
-    let os = check_resize(x, xs, size, out)?;
+    let os = check_resize(x, xs, size, q, out)?;
     let c = xs.c;
     let zp = q.input_zero_point;
     let zo = q.output_zero_point;
