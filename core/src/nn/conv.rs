@@ -53,8 +53,8 @@ impl Conv2dParams {
         let (kh, kw) = self.kernel;
         let (sh, sw) = self.stride;
         let [pt, pl, pb, pr] = self.pads;
-        let hp = input.h + pt + pb;
-        let wp = input.w + pl + pr;
+        let hp = input.h.saturating_add(pt).saturating_add(pb);
+        let wp = input.w.saturating_add(pl).saturating_add(pr);
         if kh == 0 || kw == 0 || sh == 0 || sw == 0 || self.c_out == 0 || hp < kh || wp < kw {
             return Err(NnError::BadParam);
         }
@@ -79,11 +79,11 @@ fn check_conv2d(
     check_tensor(x.len(), xs)?;
     check_zero_point(q.input_zero_point)?;
     let os = p.output_shape(xs)?;
-    let k = p.kernel.0 * p.kernel.1 * xs.c;
+    let k = p.kernel.0.saturating_mul(p.kernel.1).saturating_mul(xs.c);
     if k > MAX_REDUCTION {
         return Err(NnError::BadParam);
     }
-    check_param(w.len(), p.c_out * k)?;
+    check_param(w.len(), p.c_out.saturating_mul(k))?;
     check_param(b.len(), p.c_out)?;
     check_param(q.requant.len(), p.c_out)?;
     check_tensor(out.len(), os)?;
@@ -207,7 +207,7 @@ fn check_depthwise(
     check_tensor(x.len(), xs)?;
     check_zero_point(q.input_zero_point)?;
     let os = depthwise3x3_output_shape(xs, stride)?;
-    check_param(w.len(), 9 * xs.c)?;
+    check_param(w.len(), xs.c.saturating_mul(9))?;
     check_param(b.len(), xs.c)?;
     check_param(q.requant.len(), xs.c)?;
     check_tensor(out.len(), os)?;
@@ -323,7 +323,7 @@ fn check_pointwise(
         return Err(NnError::BadParam);
     }
     let os = Shape::new(c_out, xs.h, xs.w);
-    check_param(w.len(), c_out * xs.c)?;
+    check_param(w.len(), c_out.saturating_mul(xs.c))?;
     check_param(q.requant.len(), c_out)?;
     check_tensor(out.len(), os)?;
     Ok(os)
@@ -641,6 +641,16 @@ mod tests {
             depthwise3x3_fast(&x, xs, 1, &[0; 18], &b, &q, &mut out[..10]),
             Err(NnError::BufferTooSmall { need: 32, got: 10 })
         );
+        // absurd geometry: an error, not an overflow
+        let huge = Conv2dParams {
+            c_out: usize::MAX,
+            kernel: (4, 4),
+            stride: (1, 1),
+            pads: [3, 3, usize::MAX, 3],
+        };
+        assert!(conv2d_reference(&x, xs, &huge, &[0; 4], &b, &q, &mut out).is_err());
+        let huge = Conv2dParams { c_out: 2, kernel: (usize::MAX, 3), stride: (1, 1), pads: [0; 4] };
+        assert!(conv2d_fast(&x, xs, &huge, &[0; 4], &b, &q, &mut out).is_err());
         let p = Conv2dParams { c_out: 2, kernel: (5, 5), stride: (1, 1), pads: [0; 4] };
         assert_eq!(conv2d_fast(&x, xs, &p, &[0; 100], &b, &q, &mut out), Err(NnError::BadParam));
         assert_eq!(

@@ -53,7 +53,13 @@ impl AvgPoolParams {
         let (kh, kw) = self.kernel;
         let (pb, pr) = self.pad_bottom_right;
         // a pad of a whole window would make an all-padding window with no real pixel
-        if input.is_empty() || kh == 0 || kw == 0 || pb >= kh || pr >= kw || kh * kw > 1 << 16 {
+        if input.is_empty()
+            || kh == 0
+            || kw == 0
+            || pb >= kh
+            || pr >= kw
+            || kh.saturating_mul(kw) > 1 << 16
+        {
             return Err(NnError::BadParam);
         }
         if input.h + pb < kh || input.w + pr < kw {
@@ -239,6 +245,12 @@ mod tests {
             }
             assert!(max_diff(&r, &e) <= 1);
         }
+        let huge = AvgPoolParams { kernel: (usize::MAX, usize::MAX), pad_bottom_right: (0, 0) };
+        let q = PoolQuant::new(0.1, 0, 0.1, 0);
+        assert_eq!(
+            avgpool_reference(&[0; 16], Shape::new(1, 4, 4), &huge, &q, &mut [0; 16]),
+            Err(NnError::BadParam)
+        );
         let p = AvgPoolParams { kernel: (2, 2), pad_bottom_right: (2, 0) };
         let q = PoolQuant::new(0.1, 0, 0.1, 0);
         assert_eq!(
