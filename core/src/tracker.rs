@@ -627,6 +627,31 @@ impl Tracker {
         ll
     }
 
+    /// The E-step for feature `j` at the current pose: writes the candidates that pass the
+    /// gate into `ids` and their normalised weights (against the null hypothesis) into `w`;
+    /// returns how many there are.
+    fn e_step(
+        &self,
+        frame: &Frame,
+        j: usize,
+        ids: &mut [u32; MAX_CANDIDATES],
+        w: &mut [f64; MAX_CANDIDATES],
+    ) -> usize {
+        let mut logl = [0.0f64; MAX_CANDIDATES];
+        let mut k = 0;
+        for cand in self.cands[j].iter() {
+            if let Some(ll) = self.candidate_log_likelihood(frame, j, cand) {
+                logl[k] = ll;
+                ids[k] = cand.lm;
+                k += 1;
+            }
+        }
+        if k > 0 {
+            normalise(&logl[..k], self.null_log_likelihood(frame, j), &mut w[..k]);
+        }
+        k
+    }
+
     /// EM association (paper §3.3): alternate E-steps over every feature's gated candidates
     /// and weighted M-steps on the pose; then keep, per feature, the candidate with weight
     /// ≥ 0.5 (its weight goes to the keyframe for BA). Returns (inliers, features whose
@@ -637,26 +662,13 @@ impl Tracker {
     fn em_associate(&mut self, frame: &Frame) -> (u32, u32) {
         let feats = &frame.features[..];
         let n = feats.len();
-        let mut logl = [0.0f64; MAX_CANDIDATES];
         let mut w = [0.0f64; MAX_CANDIDATES];
         let m_step = PoseOptParams { rounds: 1, iterations: 5, robust_until_round: 1 };
         for _ in 0..self.params.em.iterations {
             self.pose_obs.clear();
             for j in 0..n {
-                let c = self.cands[j];
-                let mut k = 0;
                 let mut ids = [0u32; MAX_CANDIDATES];
-                for cand in c.iter() {
-                    if let Some(ll) = self.candidate_log_likelihood(frame, j, cand) {
-                        logl[k] = ll;
-                        ids[k] = cand.lm;
-                        k += 1;
-                    }
-                }
-                if k == 0 {
-                    continue;
-                }
-                normalise(&logl[..k], self.null_log_likelihood(frame, j), &mut w[..k]);
+                let k = self.e_step(frame, j, &mut ids, &mut w);
                 for (&wk, &id) in w[..k].iter().zip(&ids[..k]) {
                     if wk < self.params.em.min_weight {
                         continue;
@@ -691,19 +703,11 @@ impl Tracker {
             self.feat_lm[j] = NO_LANDMARK;
             self.feat_weight[j] = 0.0;
             let c = self.cands[j];
-            let mut k = 0;
             let mut ids = [0u32; MAX_CANDIDATES];
-            for cand in c.iter() {
-                if let Some(ll) = self.candidate_log_likelihood(frame, j, cand) {
-                    logl[k] = ll;
-                    ids[k] = cand.lm;
-                    k += 1;
-                }
-            }
+            let k = self.e_step(frame, j, &mut ids, &mut w);
             if k == 0 {
                 continue;
             }
-            normalise(&logl[..k], self.null_log_likelihood(frame, j), &mut w[..k]);
             let (best, wb) =
                 w[..k]
                     .iter()

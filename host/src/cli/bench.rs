@@ -12,24 +12,15 @@ use semloc_core::image::ImageView;
 use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
 use semloc_core::tracker::TrackerParams;
 
-use super::info::{open, PairArg};
+use super::info::DatasetArgs;
 use super::run::{percentiles, Percentiles};
 
 /// Arguments of `semloc bench`.
 #[derive(Args, Debug)]
 pub struct BenchArgs {
-    /// Dataset folder (as for `semloc info`).
-    #[arg(value_name = "DATASET")]
-    pub dataset: PathBuf,
-    /// Odometry sequence number.
-    #[arg(long, value_name = "XX", conflicts_with = "drive")]
-    pub seq: Option<String>,
-    /// Raw drive, as `2011_09_26_0005`.
-    #[arg(long, value_name = "DATE_NNNN")]
-    pub drive: Option<String>,
-    /// Stereo pair (default grey when present).
-    #[arg(long, value_enum)]
-    pub pair: Option<PairArg>,
+    /// The dataset.
+    #[command(flatten)]
+    pub data: DatasetArgs,
     /// Frames to time (from the start of the sequence), loaded into memory first so disk and
     /// PNG decoding are not timed.
     #[arg(long, default_value_t = 40, value_name = "N")]
@@ -62,7 +53,7 @@ struct BenchReport {
 
 /// Runs `semloc bench`.
 pub fn run(args: &BenchArgs) -> Result<()> {
-    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
+    let seq = args.data.open()?;
     let n = args.frames.min(seq.len());
     if n == 0 {
         bail!("{}: no frames to time", seq.root.display());

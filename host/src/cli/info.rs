@@ -6,9 +6,9 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use semloc::dataset::{CameraPair, Sequence};
 
-/// Arguments of `semloc info`.
+/// Which dataset a command reads: shared by `info`, `run` and `bench`.
 #[derive(Args, Debug)]
-pub struct InfoArgs {
+pub struct DatasetArgs {
     /// Dataset folder: a KITTI odometry root (holding `sequences/`, use with --seq), a sequence
     /// folder (`.../sequences/00`), a KITTI raw root or date folder (use with --drive), or a raw
     /// drive folder (`..._drive_0005_sync`).
@@ -20,10 +20,25 @@ pub struct InfoArgs {
     /// Raw drive, as `2011_09_26_0005` or `2011_09_26_drive_0005_sync` (raw roots only).
     #[arg(long, value_name = "DATE_NNNN")]
     pub drive: Option<String>,
-    /// Which stereo pair to describe: `grey` (cameras 0/1) or `colour` (2/3). Default: grey when
-    /// the folder has it, else colour.
+    /// Which stereo pair: `grey` (cameras 0/1) or `colour` (2/3, converted to luma). Default:
+    /// grey when the folder has it, else colour.
     #[arg(long, value_enum)]
     pub pair: Option<PairArg>,
+}
+
+impl DatasetArgs {
+    /// Opens the dataset the arguments name.
+    pub fn open(&self) -> Result<Sequence> {
+        open(&self.dataset, self.seq.as_deref(), self.drive.as_deref(), self.pair)
+    }
+}
+
+/// Arguments of `semloc info`.
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// The dataset.
+    #[command(flatten)]
+    pub data: DatasetArgs,
     /// Print the summary as JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -64,7 +79,7 @@ pub fn open(
 
 /// Runs `semloc info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
-    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
+    let seq = args.data.open()?;
     let summary = seq.summary();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);

@@ -11,26 +11,15 @@ use semloc::pipeline::{FrameOutput, Pipeline};
 use semloc_core::geom::Se3;
 use semloc_core::tracker::TrackerParams;
 
-use super::info::{open, PairArg};
+use super::info::DatasetArgs;
 use semloc::dataset::Sequence;
 
 /// Arguments of `semloc run`.
 #[derive(Args, Debug)]
 pub struct RunArgs {
-    /// Dataset folder (as for `semloc info`): odometry root with --seq, raw root with --drive,
-    /// or a sequence/drive folder itself.
-    #[arg(value_name = "DATASET")]
-    pub dataset: PathBuf,
-    /// Odometry sequence number, e.g. `00`.
-    #[arg(long, value_name = "XX", conflicts_with = "drive")]
-    pub seq: Option<String>,
-    /// Raw drive, as `2011_09_26_0005` or `2011_09_26_drive_0005_sync`.
-    #[arg(long, value_name = "DATE_NNNN")]
-    pub drive: Option<String>,
-    /// Stereo pair: `grey` (cameras 0/1) or `colour` (2/3, converted to luma). Default: grey
-    /// when present.
-    #[arg(long, value_enum)]
-    pub pair: Option<PairArg>,
+    /// The dataset.
+    #[command(flatten)]
+    pub data: DatasetArgs,
     /// Output folder (created): trajectory.txt (KITTI), trajectory_tum.txt, frames.csv,
     /// summary.json and, with ground truth, eval.json and plots/.
     #[arg(long, value_name = "DIR")]
@@ -261,7 +250,7 @@ pub fn execute(seq: &Sequence, cfg: &RunConfig, out: &Path) -> Result<RunOutcome
 
 /// Runs `semloc run`.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let seq = open(&args.dataset, args.seq.as_deref(), args.drive.as_deref(), args.pair)?;
+    let seq = args.data.open()?;
     let cfg = RunConfig {
         threads: args.threads,
         ransac_iterations: args.ransac_iterations,

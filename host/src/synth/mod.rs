@@ -85,20 +85,9 @@ pub const BASELINE_M: f64 = 0.54;
 /// Frame rate (Hz).
 pub const FRAME_RATE_HZ: f64 = scene::FPS;
 
-/// The CamVid 11-class names, indexed by the ids in the `semantic/` images.
-pub const CLASS_NAMES: [&str; 11] = [
-    "sky",
-    "building",
-    "pole",
-    "road",
-    "pavement",
-    "tree",
-    "sign-symbol",
-    "fence",
-    "car",
-    "pedestrian",
-    "bicyclist",
-];
+/// The CamVid 11-class names, indexed by the ids in the `semantic/` images: the same table
+/// the core's semantic front end uses.
+pub use semloc_core::seg::CLASS_NAMES;
 
 /// How much traffic moves in the scene.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
