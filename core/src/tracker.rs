@@ -251,6 +251,8 @@ pub struct Tracker {
     outlier: [bool; MAX_PAIRS],
     cands: [Candidates; FRAME_CAPACITY],
     feat_weight: [f32; FRAME_CAPACITY],
+    /// Feature holding each landmark in the EM decision (u16::MAX: none); reset after use.
+    lm_claim: [u16; MAX_LANDMARKS],
     // Keyframe scratch.
     order_keys: Vec<u64, FRAME_CAPACITY>,
     ba: BaScratch,
@@ -307,6 +309,7 @@ impl Tracker {
             outlier: [false; MAX_PAIRS],
             cands: [Candidates::EMPTY; FRAME_CAPACITY],
             feat_weight: [1.0; FRAME_CAPACITY],
+            lm_claim: [u16::MAX; MAX_LANDMARKS],
             order_keys: Vec::new(),
             ba: BaScratch::new(),
             ba_keys: Vec::new(),
@@ -702,7 +705,6 @@ impl Tracker {
         for j in 0..n {
             self.feat_lm[j] = NO_LANDMARK;
             self.feat_weight[j] = 0.0;
-            let c = self.cands[j];
             let mut ids = [0u32; MAX_CANDIDATES];
             let k = self.e_step(frame, j, &mut ids, &mut w);
             if k == 0 {
@@ -722,10 +724,30 @@ impl Tracker {
             if !chi2(&self.cam, &pc, &z).is_some_and(|s| s <= z.chi2_threshold()) {
                 continue;
             }
+            // One feature per landmark, as hard association guarantees by construction: the
+            // feature with the higher weight keeps the landmark.
+            let claim = self.lm_claim[id as usize];
+            if claim != u16::MAX {
+                let other = usize::from(claim);
+                if self.feat_weight[other] >= wb as f32 {
+                    continue;
+                }
+                self.feat_lm[other] = NO_LANDMARK;
+                self.feat_weight[other] = 0.0;
+            }
+            self.lm_claim[id as usize] = j as u16;
             self.feat_lm[j] = id;
             self.feat_weight[j] = wb as f32;
+        }
+        // Count, and clear the claims for the next frame (only the entries set).
+        for j in 0..n {
+            let id = self.feat_lm[j];
+            if id == NO_LANDMARK {
+                continue;
+            }
+            self.lm_claim[id as usize] = u16::MAX;
             inliers += 1;
-            if c.iter().next().is_some_and(|nn| nn.lm != id) {
+            if self.cands[j].iter().next().is_some_and(|nn| nn.lm != id) {
                 changed += 1;
             }
         }
