@@ -51,6 +51,8 @@ use core::fmt;
 
 pub mod conv;
 pub mod eltwise;
+pub mod graph;
+pub mod model;
 pub mod pool;
 pub mod quant;
 pub mod resize;

@@ -24,8 +24,12 @@
 /// `shift > 0` is a left shift of the accumulator before the multiply, `shift < 0` a rounding
 /// right shift after it (TFLite's convention). `multiplier == 0` encodes a zero (or
 /// unrepresentably small, `< 2^-32`) scale.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+///
+/// `repr(C)` and `Pod` so a model blob's per-channel requantisers are read in place
+/// (`nn::model`: two little-endian `i32`s each).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(C)]
 pub struct Requant {
     /// Q0.31 multiplier in `[2^30, 2^31)`, or 0.
     pub multiplier: i32,

@@ -1,0 +1,568 @@
+//! # Graph executor: one int8 inference of a parsed [`Model`] in a caller-provided arena
+//!
+//! [`run`] writes the input map (`q = luma − 128`, i.e. scale 1/255, zero point −128) into the
+//! arena at the input tensor's planned offset and executes the ops in blob order, each reading
+//! its inputs and writing its output at the offsets [`super::model::plan_arena`] chose — so the
+//! activation memory is exactly [`Model::arena_len`] bytes, known before the first frame. The
+//! per-op quantisation structs are rebuilt from the tensors' scales on the fly (f64, IEEE, so
+//! the same integers on every target). [`Kernels`] selects the reference or the fast kernel of
+//! every op; the two are bit-equal (tested per op and on whole graphs).
+//!
+//! [`Letterbox`] maps camera frames to the network's static input (integer box down-scaling
+//! and edge padding) and the labels back (nearest), and [`argmax`] turns logits into class ids.
+//!
+//! **Memory:** no allocation; the stack holds one `[ConcatInput; 8]`.
+
+use super::conv::{
+    conv2d_fast, conv2d_reference, depthwise3x3_fast, depthwise3x3_reference, pointwise_fast,
+    pointwise_reference, Conv2dParams, ConvQuant,
+};
+use super::eltwise::{
+    add_fast, add_reference, concat_fast, concat_reference, relu_fast, relu_reference, AddQuant,
+    ConcatInput, Rescale,
+};
+use super::model::{Model, ModelError, OpKind, OpSpec, MAX_INPUTS};
+use super::pool::{avgpool_fast, avgpool_reference, AvgPoolParams, PoolQuant};
+use super::resize::{resize_bilinear_fast, resize_bilinear_reference, ResizeQuant};
+use super::{NnError, Shape};
+
+/// Which implementation of each operator to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Kernels {
+    /// The plain loops that read like the ONNX definitions.
+    Reference,
+    /// The optimised kernels (bit-equal to the reference).
+    Fast,
+}
+
+/// One inference: `input` is the model's `h × w` input map (luma bytes, row-major); returns the
+/// output tensor (NHWC int8 logits of [`Model::output_shape`]) inside `arena`.
+pub fn run<'x>(
+    model: &Model<'_>,
+    input: &[u8],
+    arena: &'x mut [i8],
+    kernels: Kernels,
+) -> Result<&'x [i8], ModelError> {
+    run_observed(model, input, arena, kernels, &mut |_| {})
+}
+
+/// [`run`], calling `after_op(k)` when op `k` has finished (for per-op profiling on the host).
+pub fn run_observed<'x>(
+    model: &Model<'_>,
+    input: &[u8],
+    arena: &'x mut [i8],
+    kernels: Kernels,
+    after_op: &mut dyn FnMut(usize),
+) -> Result<&'x [i8], ModelError> {
+    let need = model.arena_len();
+    if arena.len() < need {
+        return Err(ModelError::ArenaTooSmall { need, got: arena.len() });
+    }
+    let (ih, iw) = model.input_size();
+    if input.len() != ih * iw {
+        return Err(ModelError::Truncated { need: ih * iw, got: input.len() });
+    }
+    let inp = model.input() as usize;
+    let off = model.arena_offset(inp);
+    for (a, &l) in arena[off..off + ih * iw].iter_mut().zip(input) {
+        *a = (l as i16 - 128) as i8;
+    }
+    for k in 0..model.n_ops() {
+        exec(model, k, arena, kernels).map_err(|error| ModelError::Kernel { op: k, error })?;
+        after_op(k);
+    }
+    let out = model.output() as usize;
+    let off = model.arena_offset(out);
+    Ok(&arena[off..off + model.output_shape().len()])
+}
+
+/// The read-only parts of the arena around an op's output: everything below and above it.
+#[derive(Clone, Copy)]
+struct Around<'x> {
+    lo: &'x [i8],
+    hi: &'x [i8],
+    hi_start: usize,
+}
+
+/// Splits the arena into the output range (mutable) and the rest (read-only).
+fn split(arena: &mut [i8], start: usize, len: usize) -> (Around<'_>, &mut [i8]) {
+    let (lo, rest) = arena.split_at_mut(start);
+    let (out, hi) = rest.split_at_mut(len);
+    (Around { lo, hi, hi_start: start + len }, out)
+}
+
+impl<'x> Around<'x> {
+    /// A tensor that does not overlap the output (guaranteed by the validated plan).
+    fn get(self, off: usize, len: usize) -> Result<&'x [i8], NnError> {
+        if off + len <= self.lo.len() {
+            Ok(&self.lo[off..off + len])
+        } else if off >= self.hi_start && off - self.hi_start + len <= self.hi.len() {
+            Ok(&self.hi[off - self.hi_start..off - self.hi_start + len])
+        } else {
+            Err(NnError::BadParam)
+        }
+    }
+}
+
+fn exec(model: &Model<'_>, k: usize, arena: &mut [i8], kernels: Kernels) -> Result<(), NnError> {
+    let op = model.op(k);
+    let tensor = |t: u32| model.tensor(t as usize).ok_or(NnError::BadParam);
+    let to = tensor(op.output())?;
+    let os = to.shape;
+    let (rest, out) = split(arena, model.arena_offset(op.output() as usize), os.len());
+    let view = |t: u32| -> Result<(&[i8], Shape, f64, i32), NnError> {
+        let ts = tensor(t)?;
+        let data = rest.get(model.arena_offset(t as usize), ts.shape.len())?;
+        Ok((data, ts.shape, ts.scale, ts.zero_point))
+    };
+    let fast = kernels == Kernels::Fast;
+    match op {
+        OpSpec::Conv { kind, input, geometry: g, weights, bias, requant, relu, .. } => {
+            let (x, xs, _, zp) = view(input)?;
+            let q =
+                ConvQuant { input_zero_point: zp, output_zero_point: to.zero_point, requant, relu };
+            match kind {
+                OpKind::Conv => {
+                    let p = Conv2dParams {
+                        c_out: os.c,
+                        kernel: g.kernel,
+                        stride: g.stride,
+                        pads: g.pads,
+                    };
+                    if fast {
+                        conv2d_fast(x, xs, &p, weights, bias, &q, out)?;
+                    } else {
+                        conv2d_reference(x, xs, &p, weights, bias, &q, out)?;
+                    }
+                }
+                OpKind::Depthwise3x3 => {
+                    if fast {
+                        depthwise3x3_fast(x, xs, g.stride.0, weights, bias, &q, out)?;
+                    } else {
+                        depthwise3x3_reference(x, xs, g.stride.0, weights, bias, &q, out)?;
+                    }
+                }
+                _ => {
+                    if fast {
+                        pointwise_fast(x, xs, weights, bias, &q, out)?;
+                    } else {
+                        pointwise_reference(x, xs, weights, bias, &q, out)?;
+                    }
+                }
+            }
+        }
+        OpSpec::Add { a, b, relu, .. } => {
+            let (xa, shape, sa, za) = view(a)?;
+            let (xb, _, sb, zb) = view(b)?;
+            let q = AddQuant::new(sa, za, sb, zb, to.scale, to.zero_point, relu);
+            if fast {
+                add_fast(xa, xb, shape, &q, out)?;
+            } else {
+                add_reference(xa, xb, shape, &q, out)?;
+            }
+        }
+        OpSpec::Concat { inputs, n, .. } => {
+            let empty = ConcatInput {
+                data: &[],
+                shape: Shape::new(0, 0, 0),
+                rescale: Rescale::new(1.0, 0, 1.0, 0),
+            };
+            let mut parts = [empty; MAX_INPUTS];
+            for (p, &t) in parts.iter_mut().zip(&inputs[..n]) {
+                let (data, shape, sc, zp) = view(t)?;
+                *p = ConcatInput {
+                    data,
+                    shape,
+                    rescale: Rescale::new(sc, zp, to.scale, to.zero_point),
+                };
+            }
+            if fast {
+                concat_fast(&parts[..n], out)?;
+            } else {
+                concat_reference(&parts[..n], out)?;
+            }
+        }
+        OpSpec::AvgPool { input, kernel, pad_bottom_right, .. } => {
+            let (x, xs, sc, zp) = view(input)?;
+            let p = AvgPoolParams { kernel, pad_bottom_right };
+            let q = PoolQuant::new(sc, zp, to.scale, to.zero_point);
+            if fast {
+                avgpool_fast(x, xs, &p, &q, out)?;
+            } else {
+                avgpool_reference(x, xs, &p, &q, out)?;
+            }
+        }
+        OpSpec::Resize { input, .. } => {
+            let (x, xs, sc, zp) = view(input)?;
+            let q = ResizeQuant::new(sc, zp, to.scale, to.zero_point);
+            if fast {
+                resize_bilinear_fast(x, xs, (os.h, os.w), &q, out)?;
+            } else {
+                resize_bilinear_reference(x, xs, (os.h, os.w), &q, out)?;
+            }
+        }
+        OpSpec::Relu { input, .. } => {
+            let (x, xs, sc, zp) = view(input)?;
+            let r = Rescale::new(sc, zp, to.scale, to.zero_point);
+            if fast {
+                relu_fast(x, xs, &r, out)?;
+            } else {
+                relu_reference(x, xs, &r, out)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Class ids from NHWC logits: per pixel the channel with the largest value (ties: the lowest
+/// channel). `labels` gets `h·w` entries.
+pub fn argmax(logits: &[i8], shape: Shape, labels: &mut [u8]) -> Result<(), ModelError> {
+    let n = shape.h * shape.w;
+    if shape.is_empty() || shape.c > 256 {
+        return Err(ModelError::BadIo);
+    }
+    if logits.len() < shape.len() {
+        return Err(ModelError::Truncated { need: shape.len(), got: logits.len() });
+    }
+    if labels.len() < n {
+        return Err(ModelError::Truncated { need: n, got: labels.len() });
+    }
+    for (l, px) in labels.iter_mut().zip(logits.chunks_exact(shape.c)) {
+        let mut best = 0usize;
+        for (c, &v) in px.iter().enumerate().skip(1) {
+            if v > px[best] {
+                best = c;
+            }
+        }
+        *l = best as u8;
+    }
+    Ok(())
+}
+
+/// How a camera frame maps onto the network's static input: an integer down-scaling `factor`
+/// (`f × f` box mean) and edge-replicated padding on the right and bottom.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Letterbox {
+    /// Down-scaling factor (1 = native resolution).
+    pub factor: usize,
+    /// Frame width.
+    pub src_w: usize,
+    /// Frame height.
+    pub src_h: usize,
+    /// Network input width.
+    pub model_w: usize,
+    /// Network input height.
+    pub model_h: usize,
+}
+
+impl Letterbox {
+    /// The smallest factor `f ≤ 8` with `ceil(src / f)` fitting the model input (KITTI
+    /// 1241x376 → 192x640: `f = 2`; CamVid 480x360 → 384x480: `f = 1`).
+    pub fn fit(
+        src_w: usize,
+        src_h: usize,
+        model_h: usize,
+        model_w: usize,
+    ) -> Result<Self, ModelError> {
+        if src_w == 0 || src_h == 0 || model_w == 0 || model_h == 0 {
+            return Err(ModelError::BadIo);
+        }
+        (1..=8)
+            .find(|&f| src_w.div_ceil(f) <= model_w && src_h.div_ceil(f) <= model_h)
+            .map(|factor| Self { factor, src_w, src_h, model_w, model_h })
+            .ok_or(ModelError::BadIo)
+    }
+
+    /// Width of the scaled frame inside the input map.
+    pub fn scaled_w(&self) -> usize {
+        self.src_w.div_ceil(self.factor)
+    }
+
+    /// Height of the scaled frame inside the input map.
+    pub fn scaled_h(&self) -> usize {
+        self.src_h.div_ceil(self.factor)
+    }
+}
+
+/// Fills the `model_h × model_w` input map from a `src_w × src_h` luma frame: each input pixel
+/// is the mean of its `f × f` block (the real pixels of a clipped edge block; rounded half up),
+/// and the padding repeats the last scaled column / row.
+pub fn prepare_input(src: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<(), ModelError> {
+    let (sw, sh, f) = (lb.src_w, lb.src_h, lb.factor);
+    if src.len() < sw * sh {
+        return Err(ModelError::Truncated { need: sw * sh, got: src.len() });
+    }
+    if out.len() < lb.model_w * lb.model_h {
+        return Err(ModelError::Truncated { need: lb.model_w * lb.model_h, got: out.len() });
+    }
+    let (w, h) = (lb.scaled_w(), lb.scaled_h());
+    if f == 0 || w > lb.model_w || h > lb.model_h {
+        return Err(ModelError::BadIo);
+    }
+    for y in 0..h {
+        let row = &mut out[y * lb.model_w..(y + 1) * lb.model_w];
+        let y0 = y * f;
+        let y1 = (y0 + f).min(sh);
+        for (x, o) in row[..w].iter_mut().enumerate() {
+            let x0 = x * f;
+            let x1 = (x0 + f).min(sw);
+            let mut sum = 0u32;
+            for sy in y0..y1 {
+                sum += src[sy * sw + x0..sy * sw + x1].iter().map(|&v| v as u32).sum::<u32>();
+            }
+            let n = ((y1 - y0) * (x1 - x0)) as u32;
+            *o = ((sum + n / 2) / n) as u8;
+        }
+        let edge = row[w - 1];
+        row[w..].fill(edge);
+    }
+    let (filled, pad) = out[..lb.model_w * lb.model_h].split_at_mut(h * lb.model_w);
+    let last = &filled[(h - 1) * lb.model_w..];
+    for r in pad.chunks_exact_mut(lb.model_w) {
+        r.copy_from_slice(last);
+    }
+    Ok(())
+}
+
+/// Labels of the input map back on the frame: `out[y][x] = labels[y / f][x / f]`.
+pub fn labels_to_frame(labels: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<(), ModelError> {
+    let (sw, sh, f) = (lb.src_w, lb.src_h, lb.factor);
+    if labels.len() < lb.model_w * lb.model_h {
+        return Err(ModelError::Truncated { need: lb.model_w * lb.model_h, got: labels.len() });
+    }
+    if out.len() < sw * sh {
+        return Err(ModelError::Truncated { need: sw * sh, got: out.len() });
+    }
+    if f == 0 || lb.scaled_w() > lb.model_w || lb.scaled_h() > lb.model_h {
+        return Err(ModelError::BadIo);
+    }
+    for (y, row) in out[..sw * sh].chunks_exact_mut(sw).enumerate() {
+        let lrow = &labels[(y / f) * lb.model_w..];
+        for (x, o) in row.iter_mut().enumerate() {
+            *o = lrow[x / f];
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::model::{encoded_len, plan_arena, write, ConvGeometry, TensorSpec};
+    use super::super::testutil::Rng;
+    use super::super::Requant;
+    use super::*;
+    use std::vec;
+    use std::vec::Vec;
+
+    /// A small random network with every op kind: conv s2 → dw s2 → pw → (pool → resize) ‖ add
+    /// → concat → relu, in the order and layout the converter produces.
+    struct Net {
+        tensors: Vec<TensorSpec>,
+        w: Vec<Vec<i8>>,
+        b: Vec<Vec<i32>>,
+        rq: Vec<Vec<Requant>>,
+    }
+
+    fn net(rng: &mut Rng, h: usize, w: usize) -> (Net, Vec<u8>) {
+        let t = |c: usize, hh: usize, ww: usize, rng: &mut Rng| TensorSpec {
+            shape: Shape::new(c, hh, ww),
+            zero_point: rng.int(-128, -60) as i32,
+            scale: rng.f64(0.01, 0.2),
+        };
+        let (h2, w2) = (h.div_ceil(2), w.div_ceil(2));
+        let (h4, w4) = (h2.div_ceil(2), w2.div_ceil(2));
+        let mut tensors =
+            vec![TensorSpec { shape: Shape::new(1, h, w), zero_point: -128, scale: 1.0 / 255.0 }];
+        for (c, hh, ww) in [
+            (8, h2, w2),  // 1 conv 3x3 s2
+            (8, h4, w4),  // 2 dw s2
+            (12, h4, w4), // 3 pw
+            (12, 2, 2),   // 4 pool
+            (12, h4, w4), // 5 resize
+            (12, h4, w4), // 6 add
+            (24, h4, w4), // 7 concat
+            (24, h4, w4), // 8 relu
+            (5, h4, w4),  // 9 pw classifier
+            (5, h, w),    // 10 resize to input size
+        ] {
+            tensors.push(t(c, hh, ww, rng));
+        }
+        let mut n = Net { tensors, w: vec![], b: vec![], rq: vec![] };
+        for (co, len) in [(8usize, 8 * 9), (8, 9 * 8), (12, 12 * 8), (5, 5 * 24)] {
+            n.w.push(rng.weights(len));
+            n.b.push((0..co).map(|_| rng.int(-2000, 2000) as i32).collect());
+            n.rq.push((0..co).map(|_| Requant::from_scale(rng.f64(0.0005, 0.01))).collect());
+        }
+        let blob = encode(&n, h4, w4);
+        (n, blob)
+    }
+
+    fn encode(n: &Net, h4: usize, w4: usize) -> Vec<u8> {
+        let conv = |k: usize, kind, input, output, g: ConvGeometry, relu| OpSpec::Conv {
+            kind,
+            input,
+            output,
+            geometry: g,
+            weights: &n.w[k],
+            bias: &n.b[k],
+            requant: &n.rq[k],
+            relu,
+        };
+        let g3s2 = ConvGeometry { kernel: (3, 3), stride: (2, 2), pads: [1; 4] };
+        let g1 = ConvGeometry { kernel: (1, 1), stride: (1, 1), pads: [0; 4] };
+        let mut cat = [0u32; MAX_INPUTS];
+        cat[0] = 5;
+        cat[1] = 6;
+        let pool = AvgPoolParams::ppm(Shape::new(12, h4, w4), 2).unwrap();
+        let ops = [
+            conv(0, OpKind::Conv, 0, 1, g3s2, true),
+            conv(1, OpKind::Depthwise3x3, 1, 2, g3s2, true),
+            conv(2, OpKind::Pointwise, 2, 3, g1, false),
+            OpSpec::AvgPool {
+                input: 3,
+                output: 4,
+                kernel: pool.kernel,
+                pad_bottom_right: pool.pad_bottom_right,
+            },
+            OpSpec::Resize { input: 4, output: 5 },
+            OpSpec::Add { a: 3, b: 5, output: 6, relu: true },
+            OpSpec::Concat { inputs: cat, n: 2, output: 7 },
+            OpSpec::Relu { input: 7, output: 8 },
+            conv(3, OpKind::Pointwise, 8, 9, g1, false),
+            OpSpec::Resize { input: 9, output: 10 },
+        ];
+        let mut offsets = vec![0u32; n.tensors.len()];
+        let arena = plan_arena(&n.tensors, &ops, 0, 10, &mut offsets).unwrap();
+        let mut blob = vec![0u8; encoded_len(&n.tensors, &ops)];
+        write(&n.tensors, &ops, 0, 10, &offsets, arena, &mut blob).unwrap();
+        blob
+    }
+
+    /// The blob in a 4-byte aligned buffer.
+    fn aligned(blob: &[u8]) -> Vec<u32> {
+        let mut v = vec![0u32; blob.len().div_ceil(4)];
+        bytemuck::cast_slice_mut::<u32, u8>(&mut v)[..blob.len()].copy_from_slice(blob);
+        v
+    }
+
+    #[test]
+    fn fast_and_reference_graphs_are_bit_equal() {
+        let mut rng = Rng::new(7);
+        for case in 0..12 {
+            let (h, w) = (rng.usize(9, 40), rng.usize(9, 40));
+            let (_n, blob) = net(&mut rng, h, w);
+            let words = aligned(&blob);
+            let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
+            let m = Model::parse(bytes).unwrap();
+            assert_eq!(m.n_ops(), 10);
+            let input: Vec<u8> = (0..h * w).map(|_| rng.int(0, 255) as u8).collect();
+            let mut a1 = vec![0i8; m.arena_len()];
+            let mut a2 = vec![0i8; m.arena_len()];
+            let o1 = run(&m, &input, &mut a1, Kernels::Fast).unwrap().to_vec();
+            let o2 = run(&m, &input, &mut a2, Kernels::Reference).unwrap().to_vec();
+            assert_eq!(o1, o2, "case {case} {h}x{w}");
+            assert_eq!(o1.len(), 5 * h * w);
+            // not a constant output
+            assert!(o1.iter().any(|&v| v != o1[0]), "case {case}");
+            let mut labels = vec![0u8; h * w];
+            argmax(&o1, m.output_shape(), &mut labels).unwrap();
+            assert!(labels.iter().all(|&l| l < 5));
+        }
+    }
+
+    #[test]
+    fn arena_plan_reuses_memory_and_is_checked() {
+        let mut rng = Rng::new(3);
+        let (n, blob) = net(&mut rng, 64, 64);
+        let words = aligned(&blob);
+        let bytes = &bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()];
+        let m = Model::parse(bytes).unwrap();
+        let total: usize = n.tensors.iter().map(|t| t.shape.len()).sum();
+        assert!(m.arena_len() < total, "plan {} vs sum {}", m.arena_len(), total);
+        // too small an arena is an error, not a panic
+        let mut small = vec![0i8; m.arena_len() - 1];
+        let input = vec![0u8; 64 * 64];
+        assert!(matches!(
+            run(&m, &input, &mut small, Kernels::Fast),
+            Err(ModelError::ArenaTooSmall { .. })
+        ));
+        assert!(matches!(
+            run(&m, &input[1..], &mut vec![0i8; m.arena_len()], Kernels::Fast),
+            Err(ModelError::Truncated { .. })
+        ));
+    }
+
+    #[test]
+    fn corrupt_blobs_are_rejected_with_their_error() {
+        let mut rng = Rng::new(5);
+        let (_n, blob) = net(&mut rng, 20, 24);
+        let parse = |b: &[u8]| {
+            let words = aligned(b);
+            Model::parse(&bytemuck::cast_slice::<u32, u8>(&words)[..b.len()]).map(|_| ())
+        };
+        assert_eq!(parse(&blob), Ok(()));
+        let mut bad = blob.clone();
+        bad[0] = b'X';
+        assert_eq!(parse(&bad), Err(ModelError::BadMagic));
+        let mut bad = blob.clone();
+        bad[8] = 9;
+        assert_eq!(parse(&bad), Err(ModelError::UnsupportedVersion { got: 9 }));
+        assert!(matches!(parse(&blob[..blob.len() - 1]), Err(ModelError::Truncated { .. })));
+        assert!(matches!(parse(&blob[..10]), Err(ModelError::Truncated { .. })));
+        // every single bit flip after the CRC field is caught
+        for i in (20..blob.len()).step_by(97) {
+            let mut bad = blob.clone();
+            bad[i] ^= 1 << (i % 8);
+            assert!(matches!(parse(&bad), Err(ModelError::BadChecksum { .. })), "byte {i}");
+        }
+        // a structurally bad blob with a valid CRC: op 0 reading tensor 9 (not yet computed)
+        let m_ops = u32::from_le_bytes(blob[44..48].try_into().unwrap()) as usize;
+        let mut bad = blob.clone();
+        bad[m_ops + 8..m_ops + 12].copy_from_slice(&9u32.to_le_bytes());
+        let crc = super::super::model::crc32(&bad[20..]);
+        bad[16..20].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(parse(&bad), Err(ModelError::BadOp { op: 0 }));
+        // misaligned
+        let words = aligned(&[&[0u8][..], &blob].concat());
+        let b = &bytemuck::cast_slice::<u32, u8>(&words)[1..1 + blob.len()];
+        assert_eq!(Model::parse(b).map(|_| ()), Err(ModelError::Misaligned));
+    }
+
+    #[test]
+    fn crc_matches_zlib() {
+        // zlib.crc32(b"123456789") == 0xCBF43926
+        assert_eq!(super::super::model::crc32(b"123456789"), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn letterbox_maps_frames_both_ways() {
+        let lb = Letterbox::fit(1241, 376, 192, 640).unwrap();
+        assert_eq!((lb.factor, lb.scaled_w(), lb.scaled_h()), (2, 621, 188));
+        let lb1 = Letterbox::fit(480, 360, 384, 480).unwrap();
+        assert_eq!(lb1.factor, 1);
+        assert!(Letterbox::fit(10000, 376, 192, 640).is_err());
+        let (sw, sh) = (7, 5);
+        let src: Vec<u8> = (0..sw * sh).map(|i| (i * 7 % 256) as u8).collect();
+        let lb = Letterbox::fit(sw, sh, 4, 6).unwrap();
+        assert_eq!(lb.factor, 2);
+        let mut inp = vec![0u8; 24];
+        prepare_input(&src, &lb, &mut inp).unwrap();
+        // block (0,0): pixels 0,1,7,8 → values 0,7,49,56 → mean 28
+        assert_eq!(inp[0], 28);
+        // last column block is 1 pixel wide (x = 6): rows 0,1 → 42, 91 → 66.5 → 67
+        assert_eq!(inp[3], 67);
+        assert_eq!(inp[4], inp[3]);
+        assert_eq!(inp[5], inp[3]);
+        // last row block is 1 row (y = 4); row 3 of the map repeats row 2
+        assert_eq!(&inp[18..24], &inp[12..18]);
+        let labels: Vec<u8> = (0..24).map(|i| i as u8).collect();
+        let mut out = vec![0u8; sw * sh];
+        labels_to_frame(&labels, &lb, &mut out).unwrap();
+        assert_eq!(out[0], 0);
+        assert_eq!(out[6], 3);
+        assert_eq!(out[4 * sw + 6], 2 * 6 + 3);
+        assert!(prepare_input(&src[1..], &lb, &mut inp).is_err());
+    }
+}
