@@ -215,6 +215,49 @@ fn exec(model: &Model<'_>, k: usize, arena: &mut [i8], kernels: Kernels) -> Resu
     Ok(())
 }
 
+/// Caller-provided working memory of [`segment_frame`]: the input map, the activation arena
+/// and the labels at the network's resolution.
+pub struct SegBuffers<'b> {
+    /// `model_h × model_w` bytes.
+    pub input: &'b mut [u8],
+    /// [`Model::arena_len`] bytes.
+    pub arena: &'b mut [i8],
+    /// `model_h × model_w` bytes.
+    pub labels: &'b mut [u8],
+}
+
+/// Labels one camera frame: letterbox the `lb.src_w × lb.src_h` luma frame into the input map,
+/// run the network, take the arg-max class per pixel and map it back onto the frame
+/// (`out`: `src_w × src_h` class ids).
+pub fn segment_frame(
+    model: &Model<'_>,
+    lb: &Letterbox,
+    luma: &[u8],
+    bufs: SegBuffers<'_>,
+    kernels: Kernels,
+    out: &mut [u8],
+) -> Result<(), ModelError> {
+    let (mh, mw) = model.input_size();
+    if (lb.model_h, lb.model_w) != (mh, mw) {
+        return Err(ModelError::BadIo);
+    }
+    let n = mh * mw;
+    if bufs.input.len() < n || bufs.labels.len() < n {
+        return Err(ModelError::Truncated {
+            need: n,
+            got: bufs.input.len().min(bufs.labels.len()),
+        });
+    }
+    prepare_input(luma, lb, bufs.input)?;
+    let logits = run(model, &bufs.input[..n], bufs.arena, kernels)?;
+    let os = model.output_shape();
+    if (os.h, os.w) != (mh, mw) {
+        return Err(ModelError::BadIo);
+    }
+    argmax(logits, os, bufs.labels)?;
+    labels_to_frame(bufs.labels, lb, out)
+}
+
 /// Class ids from NHWC logits: per pixel the channel with the largest value (ties: the lowest
 /// channel). `labels` gets `h·w` entries.
 pub fn argmax(logits: &[i8], shape: Shape, labels: &mut [u8]) -> Result<(), ModelError> {
@@ -528,6 +571,39 @@ mod tests {
         let words = aligned(&[&[0u8][..], &blob].concat());
         let b = &bytemuck::cast_slice::<u32, u8>(&words)[1..1 + blob.len()];
         assert_eq!(Model::parse(b).map(|_| ()), Err(ModelError::Misaligned));
+    }
+
+    #[test]
+    fn segment_frame_labels_a_frame() {
+        let mut rng = Rng::new(11);
+        let (_n, blob) = net(&mut rng, 16, 24);
+        let words = aligned(&blob);
+        let m = Model::parse(&bytemuck::cast_slice::<u32, u8>(&words)[..blob.len()]).unwrap();
+        let (sw, sh) = (45, 31);
+        let luma: Vec<u8> = (0..sw * sh).map(|_| rng.int(0, 255) as u8).collect();
+        let lb = Letterbox::fit(sw, sh, 16, 24).unwrap();
+        assert_eq!(lb.factor, 2);
+        let (mut input, mut arena, mut labels) =
+            (vec![0u8; 16 * 24], vec![0i8; m.arena_len()], vec![0u8; 16 * 24]);
+        let mut out = vec![0u8; sw * sh];
+        let bufs = SegBuffers { input: &mut input, arena: &mut arena, labels: &mut labels };
+        segment_frame(&m, &lb, &luma, bufs, Kernels::Fast, &mut out).unwrap();
+        // the same as doing the steps by hand
+        let mut inp2 = vec![0u8; 16 * 24];
+        prepare_input(&luma, &lb, &mut inp2).unwrap();
+        let mut a2 = vec![0i8; m.arena_len()];
+        let logits = run(&m, &inp2, &mut a2, Kernels::Reference).unwrap().to_vec();
+        let mut l2 = vec![0u8; 16 * 24];
+        argmax(&logits, m.output_shape(), &mut l2).unwrap();
+        assert_eq!(labels, l2);
+        assert_eq!(out[(2 * sw) + 2], l2[24 + 1]);
+        // a letterbox for another input size is refused
+        let other = Letterbox::fit(sw, sh, 32, 48).unwrap();
+        let bufs = SegBuffers { input: &mut input, arena: &mut arena, labels: &mut labels };
+        assert_eq!(
+            segment_frame(&m, &other, &luma, bufs, Kernels::Fast, &mut out),
+            Err(ModelError::BadIo)
+        );
     }
 
     #[test]
