@@ -6,5 +6,6 @@
 //! workspace slot fixed by the product shape and proves that core links into a second crate
 //! built with the same `no_std` settings.
 #![no_std]
+#![forbid(unsafe_code)]
 
 pub use semloc_core as core_crate;

@@ -5,6 +5,7 @@
 //! The core (`semloc-core`) stays `no_std`; everything that touches files lives here, and every
 //! file error names the file (and line, where there is one).
 
+#![forbid(unsafe_code)]
 pub mod dataset;
 pub mod eval;
 pub mod pipeline;

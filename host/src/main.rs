@@ -3,6 +3,7 @@
 //! Each subcommand lives in its own module under `cli/`; this file only parses arguments,
 //! dispatches, and turns errors into a message naming the file and problem plus exit code 1
 //! (clap uses 2 for usage errors).
+#![forbid(unsafe_code)]
 
 use clap::{Parser, Subcommand};
 

@@ -1,4 +1,5 @@
 //! Shared helpers for semloc's end-to-end tests (the tests themselves live in `tests/tests/`).
+#![forbid(unsafe_code)]
 use std::path::PathBuf;
 
 /// The shared real-data folder (`../shared/data` from the workspace root), if it exists.
