@@ -19,6 +19,8 @@
 //! The depthwise kernel keeps a 64-channel `i32` accumulator block on the stack (256 bytes).
 
 use super::quant::clamp_range;
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+use super::quant::{fits_simd_requant, simd_allowed};
 use super::{check_param, check_tensor, check_zero_point, NnError, Requant, Shape, MAX_REDUCTION};
 
 /// Quantisation of a conv: zero points, per-output-channel requantisers, fused ReLU.
@@ -146,7 +148,9 @@ fn tap_range(o: usize, stride: usize, pad: usize, k: usize, n: usize) -> (usize,
 }
 
 /// General conv, fast: per output pixel the valid kernel rows are contiguous NHWC runs of
-/// `kw_valid · c_in` bytes in both input and weights, so each is one dot product.
+/// `kw_valid · c_in` bytes in both input and weights, so each is one dot product. On x86-64
+/// with AVX2 a 3×3 conv of a one-channel input (the network's first layer) takes
+/// [`super::simd`]'s kernel: five `vpmaddwd` per 8 output channels and pixel.
 #[allow(clippy::too_many_arguments)]
 pub fn conv2d_fast(
     x: &[i8],
@@ -160,6 +164,30 @@ pub fn conv2d_fast(
     let os = check_conv2d(x, xs, p, w, b, q, out)?;
     let (kh, kw) = p.kernel;
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if simd_allowed()
+        && xs.c == 1
+        && p.kernel == (3, 3)
+        && fits_simd_requant(9 * 255 * 127, b, q.requant)
+    {
+        let a = super::simd::Conv1 {
+            x,
+            h: xs.h,
+            w: xs.w,
+            oh: os.h,
+            ow: os.w,
+            stride: p.stride,
+            pad: (p.pads[0], p.pads[1]),
+            wt: w,
+            bias: b,
+            requant: q.requant,
+            zp: q.input_zero_point,
+            zo: q.output_zero_point,
+            lo,
+        };
+        super::simd::conv1(&a, out);
+        return Ok(os);
+    }
     let ci = xs.c;
     let wk = kh * kw * ci;
     let out = &mut out[..os.len()];
@@ -253,8 +281,10 @@ pub fn depthwise3x3_reference(
 /// Channels per accumulator block of the fast depthwise kernel.
 const DW_BLOCK: usize = 64;
 
-/// Depthwise 3×3, fast: per output pixel and 64-channel block, each valid tap adds a whole
-/// channel vector (`x[iy, ix, c..]·w[ky, kx, c..]`) to a stack accumulator, which vectorises.
+/// Depthwise 3×3, fast. On x86-64 with AVX2: [`super::simd`]'s kernel (8 channels per vector;
+/// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation). Portable:
+/// per output pixel and 64-channel block, each valid tap adds a whole channel vector
+/// (`x[iy, ix, c..]·w[ky, kx, c..]`) to a stack accumulator, which auto-vectorises.
 #[allow(clippy::too_many_arguments)]
 pub fn depthwise3x3_fast(
     x: &[i8],
@@ -267,6 +297,41 @@ pub fn depthwise3x3_fast(
 ) -> Result<Shape, NnError> {
     let os = check_depthwise(x, xs, stride, w, b, q, out)?;
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if simd_allowed() && fits_simd_requant(9 * 255 * 127, b, q.requant) {
+        let a = super::simd::Dw {
+            x,
+            h: xs.h,
+            w: xs.w,
+            c: xs.c,
+            stride,
+            wt: w,
+            bias: b,
+            requant: q.requant,
+            zp: q.input_zero_point,
+            zo: q.output_zero_point,
+            lo,
+        };
+        super::simd::depthwise(&a, out);
+        return Ok(os);
+    }
+    depthwise3x3_portable(x, xs, stride, w, b, q, out, os, (lo, hi));
+    Ok(os)
+}
+
+/// The portable depthwise kernel (see [`depthwise3x3_fast`]).
+#[allow(clippy::too_many_arguments)]
+fn depthwise3x3_portable(
+    x: &[i8],
+    xs: Shape,
+    stride: usize,
+    w: &[i8],
+    b: &[i32],
+    q: &ConvQuant<'_>,
+    out: &mut [i8],
+    os: Shape,
+    (lo, hi): (i32, i32),
+) {
     let c = xs.c;
     let zp = q.input_zero_point;
     let out = &mut out[..os.len()];
@@ -305,7 +370,74 @@ pub fn depthwise3x3_fast(
             }
         }
     }
-    Ok(os)
+}
+
+/// Output channels per block of the packed 1×1 weights.
+pub const PW_BLOCK: usize = 8;
+/// Input channels per group of the packed 1×1 weights.
+pub const PW_GROUP: usize = 4;
+
+/// Bytes of packed 1×1 weights for `c_out × c_in`: both padded, `c_out` to a multiple of
+/// [`PW_BLOCK`], `c_in` to a multiple of [`PW_GROUP`] (saturating, so absurd sizes fail the
+/// length checks).
+pub const fn pointwise_packed_len(c_out: usize, c_in: usize) -> usize {
+    let co = c_out.div_ceil(PW_BLOCK).saturating_mul(PW_BLOCK);
+    let ci = c_in.div_ceil(PW_GROUP).saturating_mul(PW_GROUP);
+    co.saturating_mul(ci)
+}
+
+/// Position of weight `(co, ci)` in the packed 1×1 layout (see [`pack_pointwise`]).
+#[inline]
+pub const fn pointwise_packed_index(co: usize, ci: usize, c_in: usize) -> usize {
+    let groups = c_in.div_ceil(PW_GROUP);
+    (co / PW_BLOCK) * groups * (PW_BLOCK * PW_GROUP)
+        + (ci / PW_GROUP) * (PW_BLOCK * PW_GROUP)
+        + (co % PW_BLOCK) * PW_GROUP
+        + ci % PW_GROUP
+}
+
+/// Packs `O·I` 1×1 weights (`w[co·c_in + ci]`) into the layout the pointwise kernels read:
+/// `[c_out/8][c_in/4][8][4]` — blocks of 8 output channels; within a block, per group of 4
+/// input channels, 32 bytes: channel 0's four weights, channel 1's, … (the 32 bytes of one
+/// 256-bit register: the four `k` of a group sit in one 32-bit lane per channel, as
+/// `vpdpbusd` / `sdot` / pairs for `vpmaddwd` want them). Padding (channels `≥ c_out`, inputs
+/// `≥ c_in`) is zero; the model parser rejects blobs where it is not.
+pub fn pack_pointwise(w: &[i8], c_out: usize, c_in: usize, out: &mut [i8]) -> Result<(), NnError> {
+    check_param(w.len(), c_out.saturating_mul(c_in))?;
+    check_param(out.len(), pointwise_packed_len(c_out, c_in))?;
+    out.fill(0);
+    for (co, row) in w.chunks_exact(c_in.max(1)).enumerate().take(c_out) {
+        for (ci, &v) in row.iter().enumerate() {
+            out[pointwise_packed_index(co, ci, c_in)] = v;
+        }
+    }
+    Ok(())
+}
+
+/// True when the padding of packed 1×1 weights is zero (what [`pack_pointwise`] writes; the
+/// fast kernels rely on it).
+pub fn pointwise_padding_is_zero(w: &[i8], c_out: usize, c_in: usize) -> bool {
+    if w.len() != pointwise_packed_len(c_out, c_in) {
+        return false;
+    }
+    let groups = c_in.div_ceil(PW_GROUP);
+    let chunk = PW_BLOCK * PW_GROUP;
+    for (block, panel) in w.chunks_exact((groups * chunk).max(1)).enumerate() {
+        let valid_co = (c_out - block * PW_BLOCK).min(PW_BLOCK);
+        for (g, lanes) in panel.chunks_exact(chunk).enumerate() {
+            let valid_k = if g + 1 == groups { c_in - g * PW_GROUP } else { PW_GROUP };
+            if valid_co == PW_BLOCK && valid_k == PW_GROUP {
+                continue;
+            }
+            for (j, lane) in lanes.chunks_exact(PW_GROUP).enumerate() {
+                let from = if j < valid_co { valid_k } else { 0 };
+                if lane[from..].iter().any(|&v| v != 0) {
+                    return false;
+                }
+            }
+        }
+    }
+    true
 }
 
 fn check_pointwise(
@@ -323,14 +455,15 @@ fn check_pointwise(
         return Err(NnError::BadParam);
     }
     let os = Shape::new(c_out, xs.h, xs.w);
-    check_param(w.len(), c_out.saturating_mul(xs.c))?;
+    check_param(w.len(), pointwise_packed_len(c_out, xs.c))?;
     check_param(q.requant.len(), c_out)?;
     check_tensor(out.len(), os)?;
     Ok(os)
 }
 
 /// Pointwise 1×1 conv (stride 1, no padding), reference. The number of output channels is
-/// `b.len()`; weights are `[c_out][c_in]`.
+/// `b.len()`; weights are packed ([`pack_pointwise`]), read through
+/// [`pointwise_packed_index`].
 pub fn pointwise_reference(
     x: &[i8],
     xs: Shape,
@@ -347,7 +480,8 @@ pub fn pointwise_reference(
                 let mut acc = 0i32;
                 for ci in 0..xs.c {
                     let xv = x[xs.index(ci, y, xx)] as i32;
-                    acc += (xv - q.input_zero_point) * w[co * xs.c + ci] as i32;
+                    let wv = w[pointwise_packed_index(co, ci, xs.c)] as i32;
+                    acc += (xv - q.input_zero_point) * wv;
                 }
                 let acc = acc.saturating_add(b[co]);
                 out[os.index(co, y, xx)] = q.requant[co].to_i8(acc, q.output_zero_point, lo, hi);
@@ -357,36 +491,11 @@ pub fn pointwise_reference(
     Ok(os)
 }
 
-/// Output channels per register block of the fast pointwise kernel.
-const PW_CO: usize = 4;
-/// Longest input row the fast pointwise kernel stages as `i16` (2 KiB of stack); the network's
-/// widest 1×1 input is 768 channels. Wider rows take the direct path (same integers).
-const PW_STAGE: usize = 1024;
-
-/// Four dot products of one staged input row with four weight rows, in one zipped loop.
-/// `i16 × i8 → i32` with `|x − zp| ≤ 255` is what `pmaddwd` / `smlal` do, and LLVM finds them.
-#[inline]
-fn dot4<T: Copy + Into<i32>>(xr: &[T], w4: &[i8], zp: i32) -> [i32; 4] {
-    let ci = xr.len();
-    let (w0, r) = w4.split_at(ci);
-    let (w1, r) = r.split_at(ci);
-    let (w2, w3) = r.split_at(ci);
-    let (mut a0, mut a1, mut a2, mut a3) = (0i32, 0i32, 0i32, 0i32);
-    for ((((&xv, &v0), &v1), &v2), &v3) in xr.iter().zip(w0).zip(w1).zip(w2).zip(w3) {
-        let xv = xv.into() - zp;
-        a0 += xv * v0 as i32;
-        a1 += xv * v1 as i32;
-        a2 += xv * v2 as i32;
-        a3 += xv * v3 as i32;
-    }
-    [a0, a1, a2, a3]
-}
-
 /// Pointwise 1×1 conv, fast: an int8 GEMM `out[p][co] = Σ_ci (x[p][ci] − zp)·w[co][ci]` with
-/// `i32` accumulation. Per pixel the input row is staged once as `i16` with the zero point
-/// subtracted (so the inner loop is a pure widening multiply-add), then multiplied by blocks
-/// of four weight rows (four independent reductions in one zipped loop, no bounds checks);
-/// leftover channels use a plain dot product.
+/// `i32` accumulation over the packed weights. On x86-64 with AVX2 it is [`super::simd`]'s
+/// register-tiled kernel (AVX-512 VNNI where the CPU has it) with vectorised requantisation;
+/// elsewhere (and for accumulators too large for the vector requantisation) the portable
+/// kernel below.
 pub fn pointwise_fast(
     x: &[i8],
     xs: Shape,
@@ -396,45 +505,79 @@ pub fn pointwise_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     let os = check_pointwise(x, xs, w, b, q, out)?;
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if simd_allowed() && fits_simd_requant(xs.c as i64 * 255 * 127, b, q.requant) {
+        let (lo, _) = clamp_range(q.output_zero_point, q.relu);
+        let a = super::simd::Pw {
+            x,
+            p: xs.h * xs.w,
+            k: xs.c,
+            w,
+            bias: b,
+            requant: q.requant,
+            zp: q.input_zero_point,
+            zo: q.output_zero_point,
+            lo,
+        };
+        super::simd::pointwise(&a, out);
+        return Ok(os);
+    }
+    pointwise_portable(x, xs, w, b, q, out);
+    Ok(os)
+}
+
+/// Longest input row the portable pointwise kernel stages as `i32` (4 KiB of stack); wider
+/// rows are staged and summed in pieces.
+const PW_STAGE: usize = 1024;
+
+/// The portable GEMM: per pixel the input row is staged once as `i32` with the zero point
+/// subtracted, then each 8-channel block is 8 independent reductions over the packed groups
+/// (the inner `[i32; 8]` update is what the auto-vectoriser turns into SIMD lanes).
+fn pointwise_portable(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i8]) {
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
     let ci = xs.c;
-    let co = os.c;
+    let co = b.len();
     let zp = q.input_zero_point;
     let zo = q.output_zero_point;
-    let x = &x[..xs.len()];
-    let out = &mut out[..os.len()];
-    let full = co / PW_CO * PW_CO;
-    let (wblk, wtail) = w.split_at(full * ci);
-    let mut stage = [0i16; PW_STAGE];
-    for (xr, orow) in x.chunks_exact(ci).zip(out.chunks_exact_mut(co)) {
-        let (oblk, otail) = orow.split_at_mut(full);
-        let staged = ci <= PW_STAGE;
-        if staged {
-            for (s, &v) in stage[..ci].iter_mut().zip(xr) {
-                *s = v as i16 - zp as i16;
+    let groups = ci.div_ceil(PW_GROUP);
+    let panel = groups * PW_BLOCK * PW_GROUP;
+    let mut stage = [0i32; PW_STAGE];
+    for (xr, orow) in x[..xs.len()].chunks_exact(ci).zip(out.chunks_exact_mut(co)) {
+        for (block, (wp, ob)) in w.chunks_exact(panel).zip(orow.chunks_mut(PW_BLOCK)).enumerate() {
+            let mut acc = [0i32; PW_BLOCK];
+            // the row in pieces of whole groups that fit the stage
+            let mut c0 = 0;
+            while c0 < ci {
+                let len = (ci - c0).min(PW_STAGE);
+                let st = &mut stage[..len.div_ceil(PW_GROUP) * PW_GROUP];
+                st.fill(0);
+                for (s, &v) in st.iter_mut().zip(&xr[c0..c0 + len]) {
+                    *s = v as i32 - zp;
+                }
+                let wq = &wp[c0 / PW_GROUP * PW_BLOCK * PW_GROUP..];
+                for (xg, wg) in st.chunks_exact(PW_GROUP).zip(wq.chunks_exact(PW_BLOCK * PW_GROUP))
+                {
+                    for (a, wl) in acc.iter_mut().zip(wg.chunks_exact(PW_GROUP)) {
+                        *a += xg[0] * wl[0] as i32
+                            + xg[1] * wl[1] as i32
+                            + xg[2] * wl[2] as i32
+                            + xg[3] * wl[3] as i32;
+                    }
+                }
+                c0 += len;
             }
-        }
-        let xb = &stage[..ci.min(PW_STAGE)];
-        for (j, (o4, w4)) in
-            oblk.chunks_exact_mut(PW_CO).zip(wblk.chunks_exact(PW_CO * ci)).enumerate()
-        {
-            let acc = if staged { dot4(xb, w4, 0) } else { dot4(xr, w4, zp) };
-            let k = j * PW_CO;
-            for (t, (o, a)) in o4.iter_mut().zip(acc).enumerate() {
-                *o = q.requant[k + t].to_i8(a.saturating_add(b[k + t]), zo, lo, hi);
+            let k0 = block * PW_BLOCK;
+            for (t, (o, &a)) in ob.iter_mut().zip(&acc).enumerate() {
+                *o = q.requant[k0 + t].to_i8(a.saturating_add(b[k0 + t]), zo, lo, hi);
             }
-        }
-        for (t, (o, wr)) in otail.iter_mut().zip(wtail.chunks_exact(ci)).enumerate() {
-            let a = dot(xr, wr, zp);
-            *o = q.requant[full + t].to_i8(a.saturating_add(b[full + t]), zo, lo, hi);
         }
     }
-    Ok(os)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nn::quant::portable;
     use crate::nn::testutil::{max_diff, quantise, Rng};
     use std::vec;
     use std::vec::Vec;
@@ -529,11 +672,15 @@ mod tests {
     #[test]
     fn conv2d_fast_equals_reference_and_float() {
         let mut rng = Rng::new(0xc0);
-        for _ in 0..300 {
-            let xs = Shape::new(rng.usize(1, 5), rng.usize(1, 11), rng.usize(1, 11));
-            let kernel = (rng.usize(1, 4), rng.usize(1, 4));
+        for i in 0..400 {
+            // every 3rd case a 3x3 conv of a one-channel map (the first layer's SIMD kernel),
+            // with up to 40 output channels
+            let first = i % 3 == 0;
+            let c_in = if first { 1 } else { rng.usize(1, 5) };
+            let xs = Shape::new(c_in, rng.usize(1, 11), rng.usize(1, 11));
+            let kernel = if first { (3, 3) } else { (rng.usize(1, 4), rng.usize(1, 4)) };
             let p = Conv2dParams {
-                c_out: rng.usize(1, 7),
+                c_out: if first { rng.usize(1, 40) } else { rng.usize(1, 7) },
                 kernel,
                 stride: (rng.usize(1, 2), rng.usize(1, 2)),
                 pads: [
@@ -547,13 +694,21 @@ mod tests {
             let k = kernel.0 * kernel.1 * xs.c;
             let x = rng.i8s(xs.len());
             let w = rng.weights(p.c_out * k);
-            let b: Vec<i32> = (0..p.c_out).map(|_| rng.int(-20_000, 20_000) as i32).collect();
+            // every 10th case: huge biases (the scalar requantisation path)
+            let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };
+            let b: Vec<i32> = (0..p.c_out).map(|_| rng.int(-bmax, bmax) as i32).collect();
             let q = rand_q(&mut rng, p.c_out, k);
             let mut r = vec![0i8; os.len()];
             let mut f = vec![1i8; os.len()];
             assert_eq!(conv2d_reference(&x, xs, &p, &w, &b, &q.conv(), &mut r), Ok(os));
             assert_eq!(conv2d_fast(&x, xs, &p, &w, &b, &q.conv(), &mut f), Ok(os));
             assert_eq!(r, f, "{xs:?} {p:?}");
+            let mut g = vec![2i8; os.len()];
+            portable(|| conv2d_fast(&x, xs, &p, &w, &b, &q.conv(), &mut g)).unwrap();
+            assert_eq!(r, g, "portable {xs:?} {p:?}");
+            if bmax > 20_000 {
+                continue;
+            }
             let e =
                 float_conv(&x, xs, os, kernel, p.stride, (p.pads[0], p.pads[1]), false, &w, &b, &q);
             assert!(max_diff(&r, &e) <= 1, "{xs:?} {p:?}");
@@ -564,46 +719,210 @@ mod tests {
     fn depthwise_fast_equals_reference_and_float() {
         let mut rng = Rng::new(0xd3);
         for i in 0..300 {
-            // channel counts straddle the 64-channel accumulator block
-            let c = if i % 5 == 0 { rng.usize(60, 140) } else { rng.usize(1, 9) };
+            // channel counts straddle the 64-channel accumulator block and the 8-lane groups
+            let c = if i % 5 == 0 { rng.usize(60, 140) } else { rng.usize(1, 19) };
             let xs = Shape::new(c, rng.usize(1, 12), rng.usize(1, 12));
             let stride = rng.usize(1, 2);
             let os = depthwise3x3_output_shape(xs, stride).unwrap();
             let x = rng.i8s(xs.len());
             let w = rng.weights(9 * c);
-            let b: Vec<i32> = (0..c).map(|_| rng.int(-5000, 5000) as i32).collect();
+            // every 10th case: huge biases (the scalar requantisation path)
+            let bmax = if i % 10 == 9 { 1 << 30 } else { 5000 };
+            let b: Vec<i32> = (0..c).map(|_| rng.int(-bmax, bmax) as i32).collect();
             let q = rand_q(&mut rng, c, 9);
             let mut r = vec![0i8; os.len()];
             let mut f = vec![1i8; os.len()];
             assert_eq!(depthwise3x3_reference(&x, xs, stride, &w, &b, &q.conv(), &mut r), Ok(os));
             assert_eq!(depthwise3x3_fast(&x, xs, stride, &w, &b, &q.conv(), &mut f), Ok(os));
             assert_eq!(r, f, "{xs:?} {stride}");
+            let mut g = vec![2i8; os.len()];
+            portable(|| depthwise3x3_fast(&x, xs, stride, &w, &b, &q.conv(), &mut g)).unwrap();
+            assert_eq!(r, g, "portable {xs:?} {stride}");
+            if bmax > 5000 {
+                continue;
+            }
             let e = float_conv(&x, xs, os, (3, 3), (stride, stride), (1, 1), true, &w, &b, &q);
             assert!(max_diff(&r, &e) <= 1, "{xs:?} {stride}");
         }
+    }
+
+    /// Packs `O·I` weights for the pointwise kernels.
+    fn packed(w: &[i8], c_out: usize, c_in: usize) -> Vec<i8> {
+        let mut p = vec![0i8; pointwise_packed_len(c_out, c_in)];
+        pack_pointwise(w, c_out, c_in, &mut p).unwrap();
+        p
+    }
+
+    /// Every SIMD path of the pointwise kernel on this machine, bit for bit against `r`.
+    #[allow(unused_variables)]
+    fn pointwise_simd_paths(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &Q, r: &[i8]) {
+        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+        {
+            let k = xs.c as i64;
+            if !crate::nn::quant::fits_simd_requant(k * 255 * 127, b, &q.rq) {
+                return;
+            }
+            let (lo, _) = clamp_range(q.zp_out, q.relu);
+            let a = crate::nn::simd::Pw {
+                x,
+                p: xs.h * xs.w,
+                k: xs.c,
+                w,
+                bias: b,
+                requant: &q.rq,
+                zp: q.zp_in,
+                zo: q.zp_out,
+                lo,
+            };
+            for vnni in [false, true] {
+                let mut f = vec![3i8; r.len()];
+                crate::nn::simd::pointwise_isa(&a, &mut f, vnni);
+                assert_eq!(f, r, "{xs:?} {} vnni {vnni}", b.len());
+            }
+        }
+    }
+
+    #[test]
+    fn pointwise_packing_round_trips() {
+        let mut rng = Rng::new(0x9a);
+        for _ in 0..50 {
+            let (co, ci) = (rng.usize(1, 30), rng.usize(1, 30));
+            let w = rng.weights(co * ci);
+            let p = packed(&w, co, ci);
+            assert!(pointwise_padding_is_zero(&p, co, ci));
+            for o in 0..co {
+                for i in 0..ci {
+                    assert_eq!(p[pointwise_packed_index(o, i, ci)], w[o * ci + i]);
+                }
+            }
+            if p.len() > co * ci {
+                // some byte is padding: a non-zero there is caught
+                let pad = (0..p.len())
+                    .find(|&j| {
+                        (0..co).all(|o| (0..ci).all(|i| pointwise_packed_index(o, i, ci) != j))
+                    })
+                    .unwrap();
+                let mut bad = p.clone();
+                bad[pad] = 1;
+                assert!(!pointwise_padding_is_zero(&bad, co, ci));
+            }
+        }
+        assert_eq!(
+            pack_pointwise(&[0; 5], 2, 3, &mut [0; 32]),
+            Err(NnError::ParamLength { need: 6, got: 5 })
+        );
     }
 
     #[test]
     fn pointwise_fast_equals_reference_and_float() {
         let mut rng = Rng::new(0x11);
         for i in 0..300 {
-            // a few rows wider than the i16 stage (the direct path)
+            // a few rows wider than the portable kernel's stage
             let c_in =
                 if i % 50 == 0 { rng.usize(PW_STAGE - 2, PW_STAGE + 40) } else { rng.usize(1, 40) };
             let xs = Shape::new(c_in, rng.usize(1, 7), rng.usize(1, 7));
-            let c_out = rng.usize(1, 19);
+            let c_out = rng.usize(1, 40);
             let x = rng.i8s(xs.len());
             let w = rng.weights(c_out * xs.c);
-            let b: Vec<i32> = (0..c_out).map(|_| rng.int(-20_000, 20_000) as i32).collect();
+            let wp = packed(&w, c_out, xs.c);
+            // every 10th case: huge biases (the scalar requantisation path)
+            let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };
+            let b: Vec<i32> = (0..c_out).map(|_| rng.int(-bmax, bmax) as i32).collect();
             let q = rand_q(&mut rng, c_out, xs.c);
             let os = Shape::new(c_out, xs.h, xs.w);
             let mut r = vec![0i8; os.len()];
             let mut f = vec![1i8; os.len()];
-            assert_eq!(pointwise_reference(&x, xs, &w, &b, &q.conv(), &mut r), Ok(os));
-            assert_eq!(pointwise_fast(&x, xs, &w, &b, &q.conv(), &mut f), Ok(os));
+            assert_eq!(pointwise_reference(&x, xs, &wp, &b, &q.conv(), &mut r), Ok(os));
+            assert_eq!(pointwise_fast(&x, xs, &wp, &b, &q.conv(), &mut f), Ok(os));
             assert_eq!(r, f, "{xs:?} {c_out}");
-            let e = float_conv(&x, xs, os, (1, 1), (1, 1), (0, 0), false, &w, &b, &q);
-            assert!(max_diff(&r, &e) <= 1, "{xs:?} {c_out}");
+            let mut p = vec![1i8; os.len()];
+            pointwise_portable(&x, xs, &wp, &b, &q.conv(), &mut p);
+            assert_eq!(r, p, "portable {xs:?} {c_out}");
+            pointwise_simd_paths(&x, xs, &wp, &b, &q, &r);
+            if bmax < 1 << 30 {
+                let e = float_conv(&x, xs, os, (1, 1), (1, 1), (0, 0), false, &w, &b, &q);
+                assert!(max_diff(&r, &e) <= 1, "{xs:?} {c_out}");
+            }
+        }
+    }
+
+    /// The depthwise and first-conv shapes of the 192×640 network (`benches/nn.rs`), channels
+    /// as there, maps smaller (odd and even sizes, for the stride-2 borders).
+    #[test]
+    fn depthwise_and_first_conv_workload_shapes_are_bit_equal() {
+        let mut rng = Rng::new(0xd4);
+        for (c, stride) in
+            [(128, 1), (148, 1), (32, 2), (48, 2), (64, 1), (64, 2), (96, 2), (96, 1)]
+        {
+            for (h, w) in [(6, 20), (7, 13), (12, 40)] {
+                let xs = Shape::new(c, h, w);
+                let os = depthwise3x3_output_shape(xs, stride).unwrap();
+                let x = rng.i8s(xs.len());
+                let wt = rng.weights(9 * c);
+                let b: Vec<i32> = (0..c).map(|_| rng.int(-5000, 5000) as i32).collect();
+                let q = rand_q(&mut rng, c, 9);
+                let mut r = vec![0i8; os.len()];
+                let mut f = vec![1i8; os.len()];
+                let mut g = vec![2i8; os.len()];
+                depthwise3x3_reference(&x, xs, stride, &wt, &b, &q.conv(), &mut r).unwrap();
+                depthwise3x3_fast(&x, xs, stride, &wt, &b, &q.conv(), &mut f).unwrap();
+                portable(|| depthwise3x3_fast(&x, xs, stride, &wt, &b, &q.conv(), &mut g)).unwrap();
+                assert_eq!(r, f, "{xs:?} {stride}");
+                assert_eq!(r, g, "portable {xs:?} {stride}");
+            }
+        }
+        // the first layer: 1 -> 32, 3x3, stride 2, pad 1 (192x640 in the network)
+        for (h, w) in [(12, 40), (13, 41), (24, 17)] {
+            let xs = Shape::new(1, h, w);
+            let p = Conv2dParams { c_out: 32, kernel: (3, 3), stride: (2, 2), pads: [1; 4] };
+            let os = p.output_shape(xs).unwrap();
+            let x = rng.i8s(xs.len());
+            let wt = rng.weights(32 * 9);
+            let b: Vec<i32> = (0..32).map(|_| rng.int(-100_000, 100_000) as i32).collect();
+            let q = rand_q(&mut rng, 32, 9);
+            let mut r = vec![0i8; os.len()];
+            let mut f = vec![1i8; os.len()];
+            conv2d_reference(&x, xs, &p, &wt, &b, &q.conv(), &mut r).unwrap();
+            conv2d_fast(&x, xs, &p, &wt, &b, &q.conv(), &mut f).unwrap();
+            assert_eq!(r, f, "{xs:?}");
+        }
+    }
+
+    /// The 1×1 shapes of the 192×640 network (`benches/nn.rs`), on smaller maps.
+    #[test]
+    fn pointwise_workload_shapes_are_bit_equal() {
+        let mut rng = Rng::new(0x12);
+        let shapes = [
+            (128, 32),
+            (128, 11),
+            (128, 128),
+            (128, 148),
+            (148, 148),
+            (256, 64),
+            (256, 128),
+            (32, 48),
+            (384, 96),
+            (48, 64),
+            (592, 128),
+            (64, 64),
+            (64, 96),
+            (64, 128),
+            (96, 148),
+            (96, 96),
+        ];
+        for (c_in, c_out) in shapes {
+            let xs = Shape::new(c_in, rng.usize(1, 6), rng.usize(1, 21));
+            let x = rng.i8s(xs.len());
+            let wp = packed(&rng.weights(c_out * c_in), c_out, c_in);
+            let b: Vec<i32> = (0..c_out).map(|_| rng.int(-20_000, 20_000) as i32).collect();
+            let q = rand_q(&mut rng, c_out, c_in);
+            let os = Shape::new(c_out, xs.h, xs.w);
+            let mut r = vec![0i8; os.len()];
+            let mut f = vec![1i8; os.len()];
+            pointwise_reference(&x, xs, &wp, &b, &q.conv(), &mut r).unwrap();
+            pointwise_fast(&x, xs, &wp, &b, &q.conv(), &mut f).unwrap();
+            assert_eq!(r, f, "{xs:?} {c_out}");
+            pointwise_simd_paths(&x, xs, &wp, &b, &q, &r);
         }
     }
 
@@ -624,14 +943,14 @@ mod tests {
             Err(NnError::BufferTooSmall { need: 32, got: 31 })
         );
         let bad_zp = ConvQuant { input_zero_point: 128, ..q };
-        assert_eq!(pointwise_fast(&x, xs, &[0; 4], &b, &bad_zp, &mut out), Err(NnError::BadParam));
+        assert_eq!(pointwise_fast(&x, xs, &[0; 32], &b, &bad_zp, &mut out), Err(NnError::BadParam));
         assert_eq!(
             depthwise3x3_reference(&x, xs, 1, &[0; 18], &b, &bad_zp, &mut out),
             Err(NnError::BadParam)
         );
         assert_eq!(
             pointwise_fast(&x, xs, &[0; 3], &b, &q, &mut out),
-            Err(NnError::ParamLength { need: 4, got: 3 })
+            Err(NnError::ParamLength { need: 32, got: 3 })
         );
         assert_eq!(
             depthwise3x3_fast(&x, xs, 3, &[0; 18], &b, &q, &mut out),
@@ -669,7 +988,7 @@ mod tests {
         let x = rng.i8s(xs.len());
         let q = rand_q(&mut rng, 128, 128);
         let b: Vec<i32> = (0..128).map(|_| rng.int(-2000, 2000) as i32).collect();
-        let wp = rng.weights(128 * 128);
+        let wp = packed(&rng.weights(128 * 128), 128, 128);
         let wd = rng.weights(9 * 128);
         let mut r = vec![0i8; xs.len()];
         let mut f = vec![0i8; xs.len()];

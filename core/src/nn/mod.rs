@@ -8,9 +8,12 @@
 //!
 //! Every operator exists twice, as tract does it: a `*_reference` kernel written as plain loops
 //! that read like the ONNX operator definition, and a `*_fast` kernel that restructures the same
-//! integer arithmetic for the compiler's auto-vectoriser (contiguous row slices, hoisted bounds,
-//! `chunks_exact`). One shared test per op runs both on random shapes and inputs and requires
-//! them to be **bit-equal**, and checks the dequantised result against a float computation.
+//! integer arithmetic. The fast kernels have a portable form, written for the compiler's
+//! auto-vectoriser (contiguous row slices, hoisted bounds, `chunks_exact`), and on x86-64 with
+//! AVX2 (the workspace builds hosts for x86-64-v3) an intrinsics form in [`simd`] (AVX-512 VNNI
+//! for the 1×1 GEMM where the CPU has it, found at run time). One shared test per op runs the
+//! reference and every fast form on random shapes (and the network's shapes) and requires them
+//! to be **bit-equal**, and checks the dequantised result against a float computation.
 //!
 //! - [`quant`]: [`Requant`] (Q0.31 multiplier + shift, gemmlowp/TFLite rounding).
 //! - [`conv`]: general `k×k` conv, depthwise 3×3 (stride 1/2, pad 1), pointwise 1×1 (int8 GEMM).
@@ -33,14 +36,19 @@
 //! depthwise conv multiplies whole channel vectors of a pixel by the tap's channel vector of
 //! weights, so both vectorise over channels without gathers. (NCHW would make the depthwise
 //! conv's inner loop a strided 3-tap stencil and the 1×1 conv a strided dot product.)
-//! Weights are `O·kh·kw·I` (TFLite's OHWI) for the general conv, `3·3·C` for depthwise and
-//! `O·I` for pointwise.
+//! Weights are `O·kh·kw·I` (TFLite's OHWI) for the general conv, `3·3·C` for depthwise, and
+//! **packed** for pointwise: [`conv::pack_pointwise`]'s `[⌈O/8⌉][⌈I/4⌉][8][4]` blocks, the
+//! operand layout of the register-tiled GEMM (32 bytes = 8 output channels × 4 input channels,
+//! one 256-bit load; `vpdpbusd`, `sdot` and `vpmaddwd` pairs all take it as is). The model blob
+//! stores that layout (`model::VERSION` 2), so nothing is repacked at run time.
 //!
 //! **Memory.** No kernel allocates: inputs, weights and outputs are caller-provided slices. The
-//! only scratch is on the stack and fixed: a 64-entry `i32` accumulator block (depthwise, pool:
-//! 256 B) and a 1024-entry `i16` staged input row (pointwise: 2 KiB). Shapes, slice lengths and
-//! zero points are checked once at entry and reported as [`NnError`]; the kernels do not panic
-//! on bad shapes or parameters.
+//! only scratch is on the stack and fixed. Portable kernels: a 64-entry `i32` accumulator block
+//! (depthwise, pool: 256 B) and a 1024-entry `i32` staged input row (pointwise: 4 KiB). The x86
+//! kernels (hosts only): 8 KiB staged input tile (VNNI GEMM), 18 KiB of per-group constants
+//! (depthwise), 40 KiB of staged rows and column taps (resize), 3 KiB (first conv). Shapes,
+//! slice lengths and zero points are checked once at entry and reported as [`NnError`]; the
+//! kernels do not panic on bad shapes or parameters.
 //!
 //! **Speed** (fast / reference, same run, x86-64 release, 2 shared cores, best of three; the
 //! `timing_*` test prints it): 1×1 conv 128→128 on 96×48 ≈ 2.2–2.4× (≈ 13 ms, ≈ 5.8 GMAC/s),
@@ -56,6 +64,8 @@ pub mod model;
 pub mod pool;
 pub mod quant;
 pub mod resize;
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+pub mod simd;
 
 pub use quant::Requant;
 

@@ -12,11 +12,11 @@
 //! [`TensorSpec`]s and [`OpSpec`]s; [`plan_arena`] places the activations and [`write`] encodes
 //! them. Writer and parser live here together so there is one definition of the format.
 //!
-//! ## Layout (version 1, little-endian, offsets from the blob start)
+//! ## Layout (version 2, little-endian, offsets from the blob start)
 //!
 //! ```text
 //! 0   magic  "SEMLOCNN"            8 bytes
-//! 8   version u32 = 1
+//! 8   version u32 = 2
 //! 12  total_len u32                whole blob, bytes
 //! 16  crc32 u32                    CRC-32 (IEEE, as zlib) of bytes [20, total_len)
 //! 20  n_tensors u32, 24 n_ops u32
@@ -32,7 +32,11 @@
 //! ```
 //!
 //! Weight layouts are those of the kernels: general conv `O·kh·kw·I`, depthwise `3·3·C`,
-//! pointwise `O·I`. The blob must sit at a 4-byte-aligned address (`include_bytes!` does not
+//! pointwise **packed** (version 2; version 1 stored `O·I`): [`write`] takes `O·I` in the
+//! [`OpSpec`] and stores [`pack_pointwise`]'s `[⌈O/8⌉][⌈I/4⌉][8][4]` blocks (8 output channels
+//! × 4 input channels per 32 bytes, zero padding, `pointwise_packed_len(O, I)` bytes), the
+//! layout the 1×1 GEMM reads without copying; the parser hands that layout out (and rejects
+//! non-zero padding). The blob must sit at a 4-byte-aligned address (`include_bytes!` does not
 //! promise that: wrap it in an aligned struct) — [`ModelError::Misaligned`] says so otherwise.
 //!
 //! **Memory:** parsing keeps only the `&[u8]`; [`Model`] is a few words. The activation arena
@@ -40,7 +44,10 @@
 
 use core::fmt;
 
-use super::conv::{depthwise3x3_output_shape, Conv2dParams};
+use super::conv::{
+    depthwise3x3_output_shape, pack_pointwise, pointwise_packed_len, pointwise_padding_is_zero,
+    Conv2dParams,
+};
 use super::pool::AvgPoolParams;
 use super::{NnError, Requant, Shape, MAX_REDUCTION};
 
@@ -50,7 +57,7 @@ compile_error!("the .slm blob is read in place as little-endian data");
 /// The magic bytes that open every blob.
 pub const MAGIC: [u8; 8] = *b"SEMLOCNN";
 /// The format version this code reads and writes.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Header size in bytes.
 pub const HEADER_LEN: usize = 64;
 /// Bytes per tensor record.
@@ -248,7 +255,8 @@ pub enum OpSpec<'a> {
         output: u32,
         /// Geometry (depthwise: 3x3, pad 1; pointwise: 1x1, stride 1, no pads).
         geometry: ConvGeometry,
-        /// Weights in the kernel's layout.
+        /// Weights. General conv `O·kh·kw·I`, depthwise `3·3·C`; pointwise: `O·I` when given
+        /// to [`write`], packed ([`pack_pointwise`]) when returned by the parser.
         weights: &'a [i8],
         /// One `i32` bias per output channel (scale `s_in · s_w[c]`).
         bias: &'a [i32],
@@ -413,10 +421,10 @@ fn check_op(op: &OpSpec<'_>, tensors: &dyn Fn(u32) -> Option<TensorSpec>) -> boo
                 }
                 OpKind::Pointwise => {
                     let ok = g.kernel == (1, 1) && g.stride == (1, 1) && g.pads == [0; 4];
-                    if !ok || x.c > MAX_REDUCTION {
+                    if !ok || x.c > MAX_REDUCTION || !pointwise_padding_is_zero(weights, co, x.c) {
                         return false;
                     }
-                    (co.saturating_mul(x.c), Some(Shape::new(co, x.h, x.w)))
+                    (pointwise_packed_len(co, x.c), Some(Shape::new(co, x.h, x.w)))
                 }
                 _ => return false,
             };
@@ -541,12 +549,24 @@ fn overlap(a: usize, alen: usize, b: usize, blen: usize) -> usize {
     hi.saturating_sub(lo)
 }
 
+/// Bytes a conv op's weights take in the blob: packed for pointwise (from `O·I`, the input
+/// tensor's channels being `I`), as given otherwise.
+fn stored_weights_len(tensors: &[TensorSpec], op: &OpSpec<'_>) -> usize {
+    match *op {
+        OpSpec::Conv { kind: OpKind::Pointwise, input, bias, .. } => {
+            tensors.get(input as usize).map_or(0, |t| pointwise_packed_len(bias.len(), t.shape.c))
+        }
+        OpSpec::Conv { weights, .. } => weights.len(),
+        _ => 0,
+    }
+}
+
 /// Bytes [`write`] needs for this graph.
 pub fn encoded_len(tensors: &[TensorSpec], ops: &[OpSpec<'_>]) -> usize {
     let mut data = 0usize;
     for op in ops {
-        if let OpSpec::Conv { weights, bias, requant, .. } = op {
-            data = align16(data + weights.len());
+        if let OpSpec::Conv { bias, requant, .. } = op {
+            data = align16(data + stored_weights_len(tensors, op));
             data = align16(data + 4 * bias.len());
             data = align16(data + 8 * requant.len());
         }
@@ -611,19 +631,27 @@ pub fn write(
         }
         let mut geo = [0usize; 8];
         match *op {
-            OpSpec::Conv { geometry: g, weights, bias, requant, relu, .. } => {
+            OpSpec::Conv { kind, input, geometry: g, weights, bias, requant, relu, .. } => {
                 out[r + 1] = relu as u8;
                 geo = [
                     g.kernel.0, g.kernel.1, g.stride.0, g.stride.1, g.pads[0], g.pads[1],
                     g.pads[2], g.pads[3],
                 ];
                 let base = data_off;
+                let wlen = stored_weights_len(tensors, op);
                 put32(out, r + 56, to32(data)?);
-                put32(out, r + 60, to32(weights.len())?);
-                for (d, &w) in out[base + data..].iter_mut().zip(weights) {
-                    *d = w as u8;
+                put32(out, r + 60, to32(wlen)?);
+                let dst = &mut out[base + data..base + data + wlen];
+                if kind == OpKind::Pointwise {
+                    let c_in = tensors.get(input as usize).map_or(0, |t| t.shape.c);
+                    pack_pointwise(weights, bias.len(), c_in, bytemuck::cast_slice_mut(dst))
+                        .map_err(|_| ModelError::BadOp { op: k })?;
+                } else {
+                    for (d, &w) in dst.iter_mut().zip(weights) {
+                        *d = w as u8;
+                    }
                 }
-                data = align16(data + weights.len());
+                data = align16(data + wlen);
                 put32(out, r + 64, to32(data)?);
                 for (j, &b) in bias.iter().enumerate() {
                     put32(out, base + data + 4 * j, b as u32);

@@ -147,6 +147,52 @@ pub fn rounding_divide_by_pot(x: i32, exponent: i32) -> i32 {
     (x >> e) + i32::from(remainder > threshold)
 }
 
+/// Largest `|x|` (after the bias and the left shift) the SIMD requantisation takes: below it,
+/// `acc + bias` and `x << left` cannot saturate, so plain (wrapping) adds and shifts equal the
+/// saturating ones of [`Requant::apply`], and every intermediate of the rounding stays in `i32`.
+pub const SIMD_REQUANT_BOUND: i64 = 1 << 30;
+
+/// True when requantising accumulators of magnitude at most `acc_bound` plus any of `bias`
+/// with any of `requant` stays below [`SIMD_REQUANT_BOUND`] (see there): the condition under
+/// which a kernel may use the vectorised requantisation. It holds for every real network (an
+/// accumulator of a 1x1 conv over 592 channels is below `2^25`); when it does not, the kernels
+/// take the scalar path, which gives the same integers.
+pub fn fits_simd_requant(acc_bound: i64, bias: &[i32], requant: &[Requant]) -> bool {
+    let max_bias = bias.iter().map(|&b| (b as i64).abs()).max().unwrap_or(0);
+    let max_left = requant.iter().map(|r| r.shift.clamp(0, 30)).max().unwrap_or(0);
+    acc_bound.saturating_add(max_bias).saturating_mul(1i64 << max_left) <= SIMD_REQUANT_BOUND
+}
+
+#[cfg(test)]
+std::thread_local! {
+    /// Set by tests to run the portable kernels where SIMD ones exist (per test thread).
+    pub(crate) static FORCE_PORTABLE: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
+}
+
+/// Whether the kernels may take their SIMD paths: always, except in tests that force the
+/// portable ones (so both are checked against the reference on x86-64).
+#[inline]
+#[cfg_attr(not(all(target_arch = "x86_64", target_feature = "avx2")), allow(dead_code))]
+pub(crate) fn simd_allowed() -> bool {
+    #[cfg(test)]
+    {
+        !FORCE_PORTABLE.with(|f| f.get())
+    }
+    #[cfg(not(test))]
+    {
+        true
+    }
+}
+
+/// Runs `f` with the portable kernels forced on this thread (tests).
+#[cfg(test)]
+pub(crate) fn portable<R>(f: impl FnOnce() -> R) -> R {
+    FORCE_PORTABLE.with(|p| p.set(true));
+    let r = f();
+    FORCE_PORTABLE.with(|p| p.set(false));
+    r
+}
+
 /// The per-input requantisers of TFLite's quantised `Add` (left shift 20): see
 /// [`crate::nn::eltwise::AddQuant`].
 pub const ADD_LEFT_SHIFT: i32 = 20;
