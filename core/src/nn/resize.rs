@@ -110,10 +110,11 @@ pub fn resize_bilinear_reference(
     Ok(os)
 }
 
-/// Bilinear resize, fast. On x86-64 with AVX2 (rows of up to 4088 values): [`super::simd`]'s
-/// kernel — each output row's two source rows blended in `y` once (staged on the stack), then
-/// per output pixel `v0·2^11 + wx·(v1 − v0)` and the requantisation, 8 channels at a time.
-/// Portable: taps hoisted per row / pixel, channel vectors blended in one pass.
+/// Bilinear resize, fast. On x86-64 with AVX2 (outputs up to 2048 wide): [`super::simd`]'s
+/// separable kernel — each source row blended in `x` once per chunk of output columns, each
+/// output row then one flat blend in `y` and requantisation of 8 values at a time, whatever
+/// the channel count. Portable: taps hoisted per row / pixel, channel vectors blended in one
+/// pass.
 pub fn resize_bilinear_fast(
     x: &[i8],
     xs: Shape,
@@ -124,7 +125,7 @@ pub fn resize_bilinear_fast(
     let os = check_resize(x, xs, size, q, out)?;
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     if super::quant::simd_allowed()
-        && xs.w * xs.c + 8 <= super::simd::RESIZE_STAGE
+        && xs.c <= super::simd::RESIZE_MAX_C
         && os.w <= super::simd::RESIZE_MAX_OW
         && super::quant::fits_simd_requant(255 << (2 * RESIZE_FRAC_BITS), &[], &[q.requant])
     {

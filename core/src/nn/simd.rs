@@ -113,6 +113,8 @@ pub(crate) struct Rq8 {
     mask: __m256i,
     /// `mask >> 1`.
     half: __m256i,
+    /// Some lane shifts left (never for the network's convs: their scales are `< 1/2`).
+    left_any: bool,
 }
 
 impl Rq8 {
@@ -151,6 +153,7 @@ impl Rq8 {
             right: v(e),
             mask: v(mask),
             half: v(mask.map(|m| m >> 1)),
+            left_any: l.iter().any(|&l| l != 0),
         }
     }
 }
@@ -160,7 +163,7 @@ impl Rq8 {
 #[target_feature(enable = "avx2")]
 pub(crate) fn requant8(x: __m256i, p: &Rq8) -> __m256i {
     let nudge = _mm256_set1_epi64x(1 << 30);
-    let x = _mm256_sllv_epi32(x, p.left);
+    let x = if p.left_any { _mm256_sllv_epi32(x, p.left) } else { x };
     let pe = _mm256_add_epi64(_mm256_mul_epi32(x, p.mult), nudge);
     let po = _mm256_add_epi64(_mm256_mul_epi32(_mm256_srli_epi64::<32>(x), p.mult_odd), nudge);
     // bits 31..62 of each product: the even ones to the low, the odd ones to the high half
@@ -375,44 +378,166 @@ unsafe fn weights_i16(w: *const i8) -> (__m256i, __m256i) {
     }
 }
 
+/// Output-channel blocks the AVX2 kernel keeps constants for at once (7 KiB).
+const AVX2_BLOCKS: usize = 32;
+/// `i16`s of the AVX2 kernel's staged input tile (6 rows of up to 1024 channels, 12 KiB).
+const STAGE_AVX2: usize = MR_AVX2 * 1024;
+
 /// # Safety
 /// Ranges as asserted by [`pointwise`].
 #[target_feature(enable = "avx2")]
 unsafe fn pw_avx2(a: &Pw<'_>, out: &mut [i8]) {
     let n = a.bias.len();
     let kq = a.k.div_ceil(4);
+    let kpad = kq * 4;
+    let panel = kq * 32;
+    if kpad * MR_AVX2 > STAGE_AVX2 {
+        // SAFETY: as for this function
+        return unsafe { pw_avx2_direct(a, out) };
+    }
+    let zo = _mm256_set1_epi32(a.zo);
+    let lo = _mm256_set1_epi32(a.lo);
+    let blocks = n.div_ceil(8);
+    let mut c0 = [_mm256_setzero_si256(); AVX2_BLOCKS];
+    let mut rq = [Rq8::splat(Requant { multiplier: 0, shift: 0 }); AVX2_BLOCKS];
+    let mut nb = [0usize; AVX2_BLOCKS];
+    // the tile's rows as i16 with the zero point subtracted (so no correction term), each
+    // padded with zeros to whole groups
+    let mut stage = [0i16; STAGE_AVX2];
+    let mut b0 = 0;
+    while b0 < blocks {
+        let nbk = (blocks - b0).min(AVX2_BLOCKS);
+        for j in 0..nbk {
+            (c0[j], rq[j], nb[j]) = block_consts(a, b0 + j, _mm256_setzero_si256(), 0);
+        }
+        let mut p0 = 0;
+        while p0 < a.p {
+            let mr = (a.p - p0).min(MR_AVX2);
+            let rows = &a.x[p0 * a.k..(p0 + mr) * a.k];
+            for (d, s) in stage.chunks_exact_mut(kpad).zip(rows.chunks_exact(a.k)) {
+                for (d, &v) in d.iter_mut().zip(s) {
+                    *d = v as i16 - a.zp as i16;
+                }
+            }
+            for j in 0..nbk {
+                let block = b0 + j;
+                // SAFETY: block < ceil(n/8) panels; rows p0..p0+mr of the output
+                let w = unsafe { a.w.as_ptr().add(block * panel) };
+                let o = unsafe { out.as_mut_ptr().add(p0 * n + block * 8) };
+                let e = (c0[j], &rq[j], zo, lo, nb[j]);
+                unsafe {
+                    match mr {
+                        6 => tile_avx2::<6>(&stage, kpad, w, o, n, e),
+                        5 => tile_avx2::<5>(&stage, kpad, w, o, n, e),
+                        4 => tile_avx2::<4>(&stage, kpad, w, o, n, e),
+                        3 => tile_avx2::<3>(&stage, kpad, w, o, n, e),
+                        2 => tile_avx2::<2>(&stage, kpad, w, o, n, e),
+                        _ => tile_avx2::<1>(&stage, kpad, w, o, n, e),
+                    }
+                }
+            }
+            p0 += mr;
+        }
+        b0 += nbk;
+    }
+}
+
+/// One AVX2 tile over the staged rows: `MR` pixels × 8 channels, the accumulators by value.
+///
+/// # Safety
+/// `stage` holds `MR` rows of `kpad` values; `w` a panel of `kpad·8` bytes; `e.4` writable
+/// bytes at `o + i·n` for `i < MR`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn tile_avx2<const MR: usize>(
+    stage: &[i16],
+    kpad: usize,
+    w: *const i8,
+    o: *mut i8,
+    n: usize,
+    (c0, rq, zo, lo, nb): (__m256i, &Rq8, __m256i, __m256i, usize),
+) {
+    let acc = [[_mm256_setzero_si256(); 2]; MR];
+    // SAFETY: by the caller
+    let acc = unsafe { kloop_avx2::<MR>(acc, stage.as_ptr(), kpad, w) };
+    #[allow(clippy::needless_range_loop)]
+    for i in 0..MR {
+        let s = _mm256_permute4x64_epi64::<0xd8>(_mm256_hadd_epi32(acc[i][0], acc[i][1]));
+        let v = finish8(_mm256_add_epi32(s, c0), rq, zo, lo);
+        // SAFETY: by the caller
+        unsafe { store8(o.add(i * n), v, nb) };
+    }
+}
+
+/// `acc[i] += Σ_k x[i][k]·w[.][k]` over staged `i16` rows: per group of 4, the weights
+/// sign-extended once, each pixel's 4 values broadcast (one 64-bit load) into two `vpmaddwd`.
+///
+/// # Safety
+/// As [`tile_avx2`].
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn kloop_avx2<const MR: usize>(
+    mut acc: [[__m256i; 2]; MR],
+    x: *const i16,
+    kpad: usize,
+    w: *const i8,
+) -> [[__m256i; 2]; MR] {
+    for q in 0..kpad / 4 {
+        // SAFETY: group q of the panel
+        let (wl, wh) = unsafe { weights_i16(w.add(q * 32)) };
+        #[allow(clippy::needless_range_loop)]
+        for i in 0..MR {
+            // SAFETY: 4 values of row i
+            let xq = unsafe { (x.add(i * kpad + 4 * q) as *const i64).read_unaligned() };
+            let xv = _mm256_set1_epi64x(xq);
+            acc[i][0] = _mm256_add_epi32(acc[i][0], _mm256_madd_epi16(xv, wl));
+            acc[i][1] = _mm256_add_epi32(acc[i][1], _mm256_madd_epi16(xv, wh));
+        }
+    }
+    acc
+}
+
+/// The AVX2 GEMM for rows too wide to stage: inputs sign-extended in registers, the zero point
+/// as a correction `− zp·Σw` in the accumulator's start.
+///
+/// # Safety
+/// Ranges as asserted by [`pointwise`].
+#[target_feature(enable = "avx2")]
+unsafe fn pw_avx2_direct(a: &Pw<'_>, out: &mut [i8]) {
+    let n = a.bias.len();
+    let kq = a.k.div_ceil(4);
     let panel = kq * 32;
     let zo = _mm256_set1_epi32(a.zo);
     let lo = _mm256_set1_epi32(a.lo);
+    let k = a.k;
     for block in 0..n.div_ceil(8) {
         // SAFETY: block < ceil(n/8), the weights hold that many panels
         let w = unsafe { a.w.as_ptr().add(block * panel) };
         let wsum = unsafe { wsum_avx2(w, kq) };
         let (c0, rq, nb) = block_consts(a, block, wsum, a.zp);
-        let mut p0 = 0;
-        while p0 < a.p {
-            let mr = (a.p - p0).min(MR_AVX2);
-            // SAFETY: rows p0..p0+mr exist; the output offset leaves nb bytes in each row
-            let t = Tile {
-                x: unsafe { a.x.as_ptr().add(p0 * a.k) },
-                k: a.k,
-                out: unsafe { out.as_mut_ptr().add(p0 * n + block * 8) },
-                n,
-            };
-            unsafe {
-                match mr {
-                    6 => tile_avx2::<6>(&t, w, c0, &rq, zo, lo, nb),
-                    5 => tile_avx2::<5>(&t, w, c0, &rq, zo, lo, nb),
-                    4 => tile_avx2::<4>(&t, w, c0, &rq, zo, lo, nb),
-                    3 => tile_avx2::<3>(&t, w, c0, &rq, zo, lo, nb),
-                    2 => tile_avx2::<2>(&t, w, c0, &rq, zo, lo, nb),
-                    _ => tile_avx2::<1>(&t, w, c0, &rq, zo, lo, nb),
+        for p in 0..a.p {
+            let x = &a.x[p * k..(p + 1) * k];
+            let (mut lo_acc, mut hi_acc) = (_mm256_setzero_si256(), _mm256_setzero_si256());
+            for q in 0..kq {
+                let mut b = [0u8; 4];
+                for (d, &v) in b.iter_mut().zip(&x[4 * q..(4 * q + 4).min(k)]) {
+                    *d = v as u8;
                 }
+                // SAFETY: group q of the panel
+                let (wl, wh) = unsafe { weights_i16(w.add(q * 32)) };
+                let xv = _mm256_cvtepi8_epi16(_mm_set1_epi32(i32::from_le_bytes(b)));
+                lo_acc = _mm256_add_epi32(lo_acc, _mm256_madd_epi16(xv, wl));
+                hi_acc = _mm256_add_epi32(hi_acc, _mm256_madd_epi16(xv, wh));
             }
-            p0 += mr;
+            let s = _mm256_permute4x64_epi64::<0xd8>(_mm256_hadd_epi32(lo_acc, hi_acc));
+            let v = finish8(_mm256_add_epi32(s, c0), &rq, zo, lo);
+            // SAFETY: nb bytes of pixel p's block
+            unsafe { store8(out.as_mut_ptr().add(p * n + block * 8), v, nb) };
         }
     }
 }
+
+// ---- AVX-512 VNNI ----
 
 /// A tile's input rows and output position.
 struct Tile {
@@ -421,52 +546,6 @@ struct Tile {
     out: *mut i8,
     n: usize,
 }
-
-/// # Safety
-/// `MR` input rows of `k` bytes at `t.x`; `w` a panel of `ceil(k/4)·32` bytes; `nb` writable
-/// bytes at `t.out + i·n` for `i < MR`.
-#[inline]
-#[target_feature(enable = "avx2")]
-unsafe fn tile_avx2<const MR: usize>(
-    t: &Tile,
-    w: *const i8,
-    c0: __m256i,
-    rq: &Rq8,
-    zo: __m256i,
-    lo: __m256i,
-    nb: usize,
-) {
-    let k = t.k;
-    let mut acc = [[_mm256_setzero_si256(); 2]; MR];
-    let kf = k / 4;
-    for q in 0..kf {
-        // SAFETY: q < ceil(k/4) panel groups; 4q + 4 ≤ k bytes in each row
-        let (wl, wh) = unsafe { weights_i16(w.add(q * 32)) };
-        for (i, a) in acc.iter_mut().enumerate() {
-            let xq = unsafe { quad(t.x.add(i * k + 4 * q)) };
-            let xv = _mm256_cvtepi8_epi16(_mm_set1_epi32(xq));
-            a[0] = _mm256_add_epi32(a[0], _mm256_madd_epi16(xv, wl));
-            a[1] = _mm256_add_epi32(a[1], _mm256_madd_epi16(xv, wh));
-        }
-    }
-    if !k.is_multiple_of(4) {
-        let (wl, wh) = unsafe { weights_i16(w.add(kf * 32)) };
-        for (i, a) in acc.iter_mut().enumerate() {
-            let xq = unsafe { tail_quad(t.x.add(i * k + 4 * kf), k % 4) };
-            let xv = _mm256_cvtepi8_epi16(_mm_set1_epi32(xq));
-            a[0] = _mm256_add_epi32(a[0], _mm256_madd_epi16(xv, wl));
-            a[1] = _mm256_add_epi32(a[1], _mm256_madd_epi16(xv, wh));
-        }
-    }
-    for (i, a) in acc.iter().enumerate() {
-        let s = _mm256_permute4x64_epi64::<0xd8>(_mm256_hadd_epi32(a[0], a[1]));
-        let v = finish8(_mm256_add_epi32(s, c0), rq, zo, lo);
-        // SAFETY: by the caller
-        unsafe { store8(t.out.add(i * t.n), v, nb) };
-    }
-}
-
-// ---- AVX-512 VNNI ----
 
 /// Pixels per VNNI tile.
 const MR_VNNI: usize = 8;
@@ -719,6 +798,8 @@ pub(crate) struct Dw<'a> {
 struct DwGroup {
     /// The 9 taps' weights, `i32`.
     w: [__m256i; 9],
+    /// Taps `(2i, 2i + 1)`'s weights as `i16` pairs per channel, for `vpmaddwd`.
+    wp: [__m256i; 4],
     /// `bias − zp·Σw`: the start of an interior pixel's sum over raw inputs.
     c_int: __m256i,
     bias: __m256i,
@@ -762,6 +843,7 @@ unsafe fn dw_avx2(a: &Dw<'_>, out: &mut [i8], oh: usize, ow: usize) {
     let groups = c.div_ceil(8);
     let empty = DwGroup {
         w: [_mm256_setzero_si256(); 9],
+        wp: [_mm256_setzero_si256(); 4],
         c_int: _mm256_setzero_si256(),
         bias: _mm256_setzero_si256(),
         rq: Rq8::splat(Requant { multiplier: 0, shift: 0 }),
@@ -787,6 +869,17 @@ unsafe fn dw_avx2(a: &Dw<'_>, out: &mut [i8], oh: usize, ow: usize) {
                 *wv = unsafe { load_n(a.wt.as_ptr().add(t * c + c0), nb) };
                 sum = _mm256_add_epi32(sum, *wv);
             }
+            for (i, wp) in gr.wp.iter_mut().enumerate() {
+                let mut l = [0i16; 16];
+                for ch in 0..nb {
+                    l[2 * ch] = a.wt[2 * i * c + c0 + ch] as i16;
+                    l[2 * ch + 1] = a.wt[(2 * i + 1) * c + c0 + ch] as i16;
+                }
+                *wp = _mm256_setr_epi16(
+                    l[0], l[1], l[2], l[3], l[4], l[5], l[6], l[7], l[8], l[9], l[10], l[11],
+                    l[12], l[13], l[14], l[15],
+                );
+            }
             gr.bias = lanes(&a.bias[c0..c0 + nb]);
             gr.c_int = _mm256_sub_epi32(gr.bias, _mm256_mullo_epi32(sum, zpv));
             gr.rq = Rq8::new(&a.requant[c0..c0 + nb]);
@@ -810,7 +903,7 @@ unsafe fn dw_avx2(a: &Dw<'_>, out: &mut [i8], oh: usize, ow: usize) {
                     let p0 = base.wrapping_add(j * 8);
                     if inside && (gr.nb == 8 || last + j * 8 <= x_len) {
                         // SAFETY: an interior pixel's taps are inside the input
-                        unsafe { dw_taps9(x.add(p0), a.w * c, c, &gr.w, gr.c_int) }
+                        unsafe { dw_taps9(x.add(p0), a.w * c, c, gr) }
                     } else {
                         let mut acc = gr.bias;
                         for ky in ky0..ky1 {
@@ -857,34 +950,29 @@ unsafe fn dw_avx2(a: &Dw<'_>, out: &mut [i8], oh: usize, ow: usize) {
 }
 
 /// `c_int + Σ x·w` over the 9 taps of an interior pixel (raw inputs, the zero point being in
-/// `c_int`).
+/// `c_int`): taps `(2i, 2i + 1)` interleaved byte by byte and sign-extended to `i16` pairs,
+/// one `vpmaddwd` per pair (`|x·w| ≤ 128·127`, a pair's sum fits its `i32` lane), tap 8 alone.
 ///
 /// # Safety
 /// 8 readable bytes at `p + ky·row + kx·c` for `ky, kx < 3`.
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn dw_taps9(
-    p: *const i8,
-    row: usize,
-    c: usize,
-    w: &[__m256i; 9],
-    c_int: __m256i,
-) -> __m256i {
-    // two chains to halve the dependency on the adds
-    let (mut a0, mut a1) = (c_int, _mm256_setzero_si256());
-    for ky in 0..3 {
-        for kx in 0..3 {
-            // SAFETY: by the caller
-            let v = unsafe { load8(p.add(ky * row + kx * c)) };
-            let m = _mm256_mullo_epi32(v, w[ky * 3 + kx]);
-            if (ky * 3 + kx) % 2 == 0 {
-                a0 = _mm256_add_epi32(a0, m);
-            } else {
-                a1 = _mm256_add_epi32(a1, m);
-            }
+unsafe fn dw_taps9(p: *const i8, row: usize, c: usize, g: &DwGroup) -> __m256i {
+    // SAFETY: by the caller
+    let tap =
+        |t: usize| unsafe { _mm_loadl_epi64(p.add(t / 3 * row + t % 3 * c) as *const __m128i) };
+    let (mut a0, mut a1) = (g.c_int, _mm256_setzero_si256());
+    for i in 0..4 {
+        let v = _mm256_cvtepi8_epi16(_mm_unpacklo_epi8(tap(2 * i), tap(2 * i + 1)));
+        let m = _mm256_madd_epi16(v, g.wp[i]);
+        if i % 2 == 0 {
+            a0 = _mm256_add_epi32(a0, m);
+        } else {
+            a1 = _mm256_add_epi32(a1, m);
         }
     }
-    _mm256_add_epi32(a0, a1)
+    let m8 = _mm256_mullo_epi32(_mm256_cvtepi8_epi32(tap(8)), g.w[8]);
+    _mm256_add_epi32(_mm256_add_epi32(a0, m8), a1)
 }
 
 // ------------------------------------------------------------------------------------------
@@ -923,10 +1011,15 @@ pub(crate) struct Conv1<'a> {
 
 /// 8-channel groups of the one-channel conv kept at once.
 const C1_GROUPS: usize = 8;
+/// The one-channel conv's taps (`ky·3 + kx`) in `i16` pairs: the three rows' `(kx 0, kx 1)`,
+/// then `kx = 2` of rows 0 and 1, then row 2's alone — pairs a 16-byte row load gives directly
+/// for 8 stride-2 pixels.
+const TAP_PAIRS: [(usize, usize); 5] = [(0, 1), (3, 4), (6, 7), (2, 5), (8, 9)];
 
 /// 3×3 conv of a one-channel map, AVX2: per output pixel the 9 taps `x − zp` (0 outside) as
-/// five `i16` pairs, each broadcast and multiplied into every 8-channel group with
-/// `vpmaddwd` against the weight pairs `(w[c][2j], w[c][2j+1])`.
+/// five `i16` pairs ([`TAP_PAIRS`]), each broadcast and multiplied into every 8-channel group
+/// with `vpmaddwd` against the matching weight pairs. With stride 2, runs of 8 interior pixels
+/// get their pairs from six 16-byte row loads (bytes `2i, 2i + 1` are pixel `i`'s `kx = 0, 1`).
 pub(crate) fn conv1(a: &Conv1<'_>, out: &mut [i8]) {
     let n = a.bias.len();
     assert!(
@@ -960,12 +1053,12 @@ unsafe fn conv1_avx2(a: &Conv1<'_>, out: &mut [i8]) {
         for j in 0..ng {
             let c0 = (g0 + j) * 8;
             let nb = (n - c0).min(8);
-            for (pair, v) in wp[j].iter_mut().enumerate() {
+            for (&(ta, tb), v) in TAP_PAIRS.iter().zip(wp[j].iter_mut()) {
                 let mut l = [0i16; 16];
                 for ch in 0..nb {
                     let w = &a.wt[(c0 + ch) * 9..(c0 + ch) * 9 + 9];
-                    l[2 * ch] = w[2 * pair] as i16;
-                    l[2 * ch + 1] = if 2 * pair + 1 < 9 { w[2 * pair + 1] as i16 } else { 0 };
+                    l[2 * ch] = w[ta] as i16;
+                    l[2 * ch + 1] = if tb < 9 { w[tb] as i16 } else { 0 };
                 }
                 *v = _mm256_setr_epi16(
                     l[0], l[1], l[2], l[3], l[4], l[5], l[6], l[7], l[8], l[9], l[10], l[11],
@@ -976,55 +1069,99 @@ unsafe fn conv1_avx2(a: &Conv1<'_>, out: &mut [i8]) {
             rq[j] = Rq8::new(&a.requant[c0..c0 + nb]);
             nbs[j] = nb;
         }
+        let op = out.as_mut_ptr();
+        // one output pixel from its five tap pairs (broadcast), every group of this pass
+        let emit = |pairs: &[__m256i; 5], o: usize| {
+            let group = |j: usize| {
+                let mut acc = bias[j];
+                for (p, w) in pairs.iter().zip(&wp[j]) {
+                    acc = _mm256_add_epi32(acc, _mm256_madd_epi16(*p, *w));
+                }
+                finish8(acc, &rq[j], zo, lo)
+            };
+            let mut j = 0;
+            while j + 4 <= ng && nbs[j + 3] == 8 {
+                let v = pack32(group(j), group(j + 1), group(j + 2), group(j + 3));
+                // SAFETY: 32 bytes of this pixel's groups j..j+4 inside `out`
+                unsafe { _mm256_storeu_si256(op.add(o + j * 8) as *mut __m256i, v) };
+                j += 4;
+            }
+            while j < ng {
+                // SAFETY: nb bytes of this pixel's group inside `out`
+                unsafe { store8(op.add(o + j * 8), group(j), nbs[j]) };
+                j += 1;
+            }
+        };
+        let zp16 = _mm256_set1_epi16(a.zp as i16);
+        let x = a.x.as_ptr();
         for oy in 0..a.oh {
             let iy0 = (oy * sy) as isize - pt as isize;
             let rows_inside = iy0 >= 0 && iy0 + 2 < a.h as isize;
-            for ox in 0..a.ow {
+            let mut ox = 0;
+            while ox < a.ow {
                 let ix0 = (ox * sx) as isize - pl as isize;
-                let mut t = [0i32; 10];
-                if rows_inside && ix0 >= 0 && ix0 + 2 < a.w as isize {
-                    let base = iy0 as usize * a.w + ix0 as usize;
-                    for ky in 0..3 {
-                        let r = &a.x[base + ky * a.w..base + ky * a.w + 3];
-                        for kx in 0..3 {
-                            t[ky * 3 + kx] = r[kx] as i32 - a.zp;
-                        }
-                    }
-                } else {
-                    for ky in 0..3 {
-                        let yy = iy0 + ky as isize;
-                        for kx in 0..3 {
-                            let xx = ix0 + kx as isize;
-                            if yy >= 0 && xx >= 0 && yy < a.h as isize && xx < a.w as isize {
-                                t[ky * 3 + kx] = a.x[yy as usize * a.w + xx as usize] as i32 - a.zp;
-                            }
-                        }
-                    }
-                }
-                let pairs =
-                    [0, 2, 4, 6, 8].map(|i| _mm256_set1_epi32((t[i] & 0xffff) | (t[i + 1] << 16)));
                 let o = (oy * a.ow + ox) * n + g0 * 8;
-                let group = |j: usize| {
-                    let mut acc = bias[j];
-                    for (p, w) in pairs.iter().zip(&wp[j]) {
-                        acc = _mm256_add_epi32(acc, _mm256_madd_epi16(*p, *w));
-                    }
-                    finish8(acc, &rq[j], zo, lo)
-                };
-                let mut j = 0;
-                while j + 4 <= ng && nbs[j + 3] == 8 {
-                    let v = pack32(group(j), group(j + 1), group(j + 2), group(j + 3));
-                    // SAFETY: 32 bytes of this pixel's groups j..j+4 inside `out`
-                    unsafe {
-                        _mm256_storeu_si256(out.as_mut_ptr().add(o + j * 8) as *mut __m256i, v)
+                // stride 2, 8 interior pixels: the tap pairs of all 8 from 16-byte row loads
+                // (pixel i's taps kx = 0, 1 are bytes 2i, 2i + 1 from ix0: one i16 pair each)
+                if sx == 2 && rows_inside && ix0 >= 0 && ox + 8 <= a.ow && ix0 as usize + 18 <= a.w
+                {
+                    let r = iy0 as usize * a.w + ix0 as usize;
+                    // SAFETY: rows iy0..iy0+3, bytes ix0..ix0+18 are inside the input
+                    let row = |ky: usize, off: usize| unsafe {
+                        _mm256_sub_epi16(
+                            _mm256_cvtepi8_epi16(_mm_loadu_si128(
+                                x.add(r + ky * a.w + off) as *const __m128i
+                            )),
+                            zp16,
+                        )
                     };
-                    j += 4;
+                    let lo16 = _mm256_set1_epi32(0xffff);
+                    let p3 = _mm256_blend_epi16::<0b1010_1010>(
+                        row(0, 2),
+                        _mm256_slli_epi32::<16>(row(1, 2)),
+                    );
+                    let p4 = _mm256_and_si256(row(2, 2), lo16);
+                    let mut tab = [[0i32; 8]; 5];
+                    for (t, v) in tab.iter_mut().zip([row(0, 0), row(1, 0), row(2, 0), p3, p4]) {
+                        // SAFETY: 32 writable bytes
+                        unsafe { _mm256_storeu_si256(t.as_mut_ptr() as *mut __m256i, v) };
+                    }
+                    #[allow(clippy::needless_range_loop)]
+                    for i in 0..8 {
+                        let pairs = [
+                            _mm256_set1_epi32(tab[0][i]),
+                            _mm256_set1_epi32(tab[1][i]),
+                            _mm256_set1_epi32(tab[2][i]),
+                            _mm256_set1_epi32(tab[3][i]),
+                            _mm256_set1_epi32(tab[4][i]),
+                        ];
+                        emit(&pairs, o + i * n);
+                    }
+                    ox += 8;
+                    continue;
                 }
-                while j < ng {
-                    // SAFETY: nb bytes of this pixel's group inside `out`
-                    unsafe { store8(out.as_mut_ptr().add(o + j * 8), group(j), nbs[j]) };
-                    j += 1;
+                // one pixel, taps gathered one by one (0 outside the input)
+                let mut t = [0i32; 10];
+                for ky in 0..3 {
+                    let yy = iy0 + ky as isize;
+                    for kx in 0..3 {
+                        let xx = ix0 + kx as isize;
+                        if yy >= 0 && xx >= 0 && yy < a.h as isize && xx < a.w as isize {
+                            t[ky * 3 + kx] = a.x[yy as usize * a.w + xx as usize] as i32 - a.zp;
+                        }
+                    }
                 }
+                // pairs (0,1) (3,4) (6,7) (2,5) (8,-): the same sums as the 16-byte path
+                let pair = |a: i32, b: i32| _mm256_set1_epi32((a & 0xffff) | (b << 16));
+                let pairs = [
+                    pair(t[0], t[1]),
+                    pair(t[3], t[4]),
+                    pair(t[6], t[7]),
+                    pair(t[2], t[5]),
+                    pair(t[8], 0),
+                ];
+                emit(&pairs, o);
+                ox += 1;
             }
         }
         g0 += ng;
@@ -1035,13 +1172,14 @@ unsafe fn conv1_avx2(a: &Conv1<'_>, out: &mut [i8]) {
 // bilinear resize
 // ------------------------------------------------------------------------------------------
 
-/// `i32`s of the resize kernel's staged source row (16 KiB of stack): the row blended in y,
-/// `w_in · c` values, plus 8 of slack for the last partial vector.
-pub(crate) const RESIZE_STAGE: usize = 4096;
+/// `i32`s per chunk of an output row in the resize kernel (two stacked chunks: 16 KiB).
+const RESIZE_CHUNK: usize = 2048;
 /// Widest output of the SIMD resize (its x taps are tabulated once per call, 8 KiB).
 pub(crate) const RESIZE_MAX_OW: usize = 2048;
+/// Most channels of the SIMD resize (a chunk holds at least one output pixel).
+pub(crate) const RESIZE_MAX_C: usize = RESIZE_CHUNK - 16;
 
-/// One resize call (operands checked by the caller; `w_in · c + 8 ≤ RESIZE_STAGE`).
+/// One resize call (operands checked by the caller; `c ≤ RESIZE_MAX_C`, `ow ≤ RESIZE_MAX_OW`).
 pub(crate) struct Rs<'a> {
     /// Input `h × w × c`.
     pub x: &'a [i8],
@@ -1065,15 +1203,17 @@ pub(crate) struct Rs<'a> {
     pub taps: fn(usize, usize, usize) -> (usize, usize, i32),
 }
 
-/// Bilinear resize, AVX2. Per output row the two source rows are blended in y once,
-/// `v = (2^11 − wy)·(a − zp) + wy·(c − zp)` for the whole row, staged as `v·2^11` and the
-/// difference to the next column; each output pixel is then `v0·2^11 + wx·(v1 − v0)` — the
-/// reference's `(2^11 − wx)·v0 + wx·v1`, the same integer — requantised 8 channels at a time.
+/// Bilinear resize, AVX2, separable and flat. The output row is cut into chunks of whole
+/// pixels (≤ 2048 values). Per chunk and pair of source rows `(y0, y1)`, each source row is
+/// blended in x once, `h = (a − zp)·2^11 + wx·(b − a)` (= the reference's `(2^11 − wx)·a +
+/// wx·b`), staged as `s = h0·2^11` and `d = h1 − h0`; every output row of that pair is then
+/// `s + wy·d` (= `(2^11 − wy)·h0 + wy·h1`, the reference's integer) over the chunk as one flat
+/// run of values — no lanes wasted on channel counts like 11 — requantised 8 at a time and
+/// stored 32 bytes at a time. `|s|, |d·wy| < 2^31`: nothing overflows.
 pub(crate) fn resize(a: &Rs<'_>, out: &mut [i8]) {
-    let row = a.w * a.c;
     assert!(
-        a.x.len() >= a.h * row
-            && row + 8 <= RESIZE_STAGE
+        a.x.len() >= a.h * a.w * a.c
+            && a.c <= RESIZE_MAX_C
             && a.ow <= RESIZE_MAX_OW
             && out.len() >= a.oh * a.ow * a.c,
         "resize operands checked by the caller"
@@ -1087,87 +1227,105 @@ pub(crate) fn resize(a: &Rs<'_>, out: &mut [i8]) {
 #[target_feature(enable = "avx2")]
 unsafe fn resize_avx2(a: &Rs<'_>, out: &mut [i8]) {
     let c = a.c;
-    let row = a.w * c;
+    let in_row = a.w * c;
+    let x_len = a.h * in_row;
+    let out_row = a.ow * c;
     let rq = Rq8::splat(a.requant);
     let zo = _mm256_set1_epi32(a.zo);
     let lo = _mm256_set1_epi32(-128);
-    let zp2048 = _mm256_set1_epi32(a.zp << 11);
-    let mut s = [0i32; RESIZE_STAGE];
-    let mut d = [0i32; RESIZE_STAGE];
+    let zpv = _mm256_set1_epi32(a.zp);
     let x = a.x.as_ptr();
     let o = out.as_mut_ptr();
-    let out_len = a.oh * a.ow * c;
-    let full = row / 8 * 8;
-    // (x0·c, wx) per output column: x0·c < RESIZE_STAGE and wx ≤ 2^11 fit 16 bits
-    let mut xt = [(0u16, 0i16); RESIZE_MAX_OW];
+    // (x0·c, x1·c, wx) per output column
+    let mut xt = [(0u32, 0u32, 0i32); RESIZE_MAX_OW];
     for (ox, t) in xt.iter_mut().enumerate().take(a.ow) {
-        let (x0, _, wx) = (a.taps)(ox, a.w, a.ow);
-        *t = ((x0 * c) as u16, wx as i16);
+        let (x0, x1, wx) = (a.taps)(ox, a.w, a.ow);
+        *t = ((x0 * c) as u32, (x1 * c) as u32, wx);
     }
-    for oy in 0..a.oh {
-        let (y0, y1, wy) = (a.taps)(oy, a.h, a.oh);
-        let wyv = _mm256_set1_epi32(wy);
-        let wy0 = _mm256_set1_epi32(2048 - wy);
-        let (r0, r1) = (y0 * row, y1 * row);
-        // v = (2048 − wy)·a + wy·c − 2048·zp, staged as s = v·2048 (d below)
-        let mut i = 0;
-        while i < row {
-            let (va, vc) = if i < full {
-                // SAFETY: i + 8 ≤ row
-                unsafe { (load8(x.add(r0 + i)), load8(x.add(r1 + i))) }
-            } else {
-                unsafe { (load_n(x.add(r0 + i), row - i), load_n(x.add(r1 + i), row - i)) }
-            };
-            let v = _mm256_sub_epi32(
-                _mm256_add_epi32(_mm256_mullo_epi32(va, wy0), _mm256_mullo_epi32(vc, wyv)),
-                zp2048,
-            );
-            // SAFETY: i + 8 ≤ row + 8 ≤ RESIZE_STAGE
-            unsafe { _mm256_storeu_si256(s.as_mut_ptr().add(i) as *mut __m256i, v) };
-            i += 8;
+    // chunk: + 16 values of slack for the last pixel's vectors
+    let mut s = [0i32; RESIZE_CHUNK];
+    let mut d = [0i32; RESIZE_CHUNK];
+    let px_per_chunk = (RESIZE_CHUNK - 16) / c;
+    // the source value `x[r + off .. + 8] − zp` (8-byte loads inside the input, else fewer)
+    let src = |off: usize| {
+        if off + 8 <= x_len {
+            // SAFETY: 8 bytes inside the input
+            _mm256_sub_epi32(unsafe { load8(x.add(off)) }, zpv)
+        } else {
+            // SAFETY: the bytes up to the input's end
+            _mm256_sub_epi32(unsafe { load_n(x.add(off), x_len - off) }, zpv)
         }
-        // d[i] = v[i + c] − v[i] (0 in the last column, whose weight is always 0)
-        let mut i = 0;
-        while i < row {
-            let here = unsafe { _mm256_loadu_si256(s.as_ptr().add(i) as *const __m256i) };
-            let next = if i + c + 8 <= row + 8 {
-                unsafe { _mm256_loadu_si256(s.as_ptr().add(i + c) as *const __m256i) }
-            } else {
-                here
-            };
-            let dv = _mm256_sub_epi32(next, here);
-            unsafe { _mm256_storeu_si256(d.as_mut_ptr().add(i) as *mut __m256i, dv) };
-            i += 8;
-        }
-        for v in &mut d[row.saturating_sub(c)..row] {
-            *v = 0;
-        }
-        for v in &mut s[..row] {
-            *v <<= 11;
-        }
-        for (ox, &(src, wx)) in xt.iter().enumerate().take(a.ow) {
-            let src = src as usize;
-            let wxv = _mm256_set1_epi32(wx as i32);
-            let at = (oy * a.ow + ox) * c;
-            // SAFETY: the output pixel is inside `out`
-            let dst = unsafe { o.add(at) };
-            let mut ch = 0;
-            while ch < c {
-                // SAFETY: src + ch + 8 ≤ row + 8 (stage slack)
+    };
+    let mut p0 = 0;
+    while p0 < a.ow {
+        let np = (a.ow - p0).min(px_per_chunk);
+        let len = np * c;
+        let mut pair = (usize::MAX, usize::MAX);
+        for oy in 0..a.oh {
+            let (y0, y1, wy) = (a.taps)(oy, a.h, a.oh);
+            if (y0, y1) != pair {
+                pair = (y0, y1);
+                // x-blend both source rows over the chunk's pixels (lanes past the pixel's
+                // channels are overwritten by the next pixel or lie in the slack)
+                for (i, &(x0, x1, wx)) in xt[p0..p0 + np].iter().enumerate() {
+                    let wxv = _mm256_set1_epi32(wx);
+                    let mut ch = 0;
+                    while ch < c {
+                        let (o0, o1) = (x0 as usize + ch, x1 as usize + ch);
+                        let (r0, r1) = (y0 * in_row, y1 * in_row);
+                        let (a0, b0) = (src(r0 + o0), src(r0 + o1));
+                        let (a1, b1) = (src(r1 + o0), src(r1 + o1));
+                        let h0 = _mm256_add_epi32(
+                            _mm256_slli_epi32::<11>(a0),
+                            _mm256_mullo_epi32(wxv, _mm256_sub_epi32(b0, a0)),
+                        );
+                        let h1 = _mm256_add_epi32(
+                            _mm256_slli_epi32::<11>(a1),
+                            _mm256_mullo_epi32(wxv, _mm256_sub_epi32(b1, a1)),
+                        );
+                        let at = i * c + ch;
+                        // SAFETY: at + 8 ≤ len + 8 ≤ RESIZE_CHUNK
+                        unsafe {
+                            _mm256_storeu_si256(
+                                s.as_mut_ptr().add(at) as *mut __m256i,
+                                _mm256_slli_epi32::<11>(h0),
+                            );
+                            _mm256_storeu_si256(
+                                d.as_mut_ptr().add(at) as *mut __m256i,
+                                _mm256_sub_epi32(h1, h0),
+                            );
+                        }
+                        ch += 8;
+                    }
+                }
+            }
+            let wyv = _mm256_set1_epi32(wy);
+            // SAFETY: the chunk's values of output row oy
+            let dst = unsafe { o.add(oy * out_row + p0 * c) };
+            let value = |i: usize| {
+                // SAFETY: i + 8 ≤ len + 8 ≤ RESIZE_CHUNK
                 let (sv, dv) = unsafe {
                     (
-                        _mm256_loadu_si256(s.as_ptr().add(src + ch) as *const __m256i),
-                        _mm256_loadu_si256(d.as_ptr().add(src + ch) as *const __m256i),
+                        _mm256_loadu_si256(s.as_ptr().add(i) as *const __m256i),
+                        _mm256_loadu_si256(d.as_ptr().add(i) as *const __m256i),
                     )
                 };
-                let acc = _mm256_add_epi32(sv, _mm256_mullo_epi32(wxv, dv));
-                // a short last vector may spill into the next pixel, written after this one
-                let m = if at + ch + 8 <= out_len { 8 } else { c - ch };
-                // SAFETY: m bytes inside `out`
-                unsafe { store8(dst.add(ch), finish8(acc, &rq, zo, lo), m) };
-                ch += 8;
+                finish8(_mm256_add_epi32(sv, _mm256_mullo_epi32(wyv, dv)), &rq, zo, lo)
+            };
+            let mut i = 0;
+            while i + 32 <= len {
+                let v = pack32(value(i), value(i + 8), value(i + 16), value(i + 24));
+                // SAFETY: 32 bytes of the chunk
+                unsafe { _mm256_storeu_si256(dst.add(i) as *mut __m256i, v) };
+                i += 32;
+            }
+            while i < len {
+                // SAFETY: min(8, len − i) bytes of the chunk
+                unsafe { store8(dst.add(i), value(i), (len - i).min(8)) };
+                i += 8;
             }
         }
+        p0 += np;
     }
 }
 
