@@ -13,8 +13,8 @@
 //! `SEMLOC_SLM=path/to/model.slm` adds the whole graph through `graph::run` (fast and
 //! reference, bit-equality checked) on a synthetic input of the model's size.
 //! `SEMLOC_NN_REPS=n` sets the repetitions of the table (default 5), `SEMLOC_NN_KINDS=pw,dw`
-//! limits it to some kinds, and `SEMLOC_NN_AVX2=1` makes the x86 kernels ignore AVX-512 VNNI
-//! (to compare the two paths on a VNNI machine); `SEMLOC_NN_NOREF=1` skips timing the reference
+//! limits it to some kinds, and `SEMLOC_NN_ISA=portable|avx2` caps the x86 fast kernels at the
+//! portable (safe, auto-vectorised) or the AVX2 ones (to compare them on a VNNI machine); `SEMLOC_NN_NOREF=1` skips timing the reference
 //! kernels (for `perf stat` of the fast ones).
 
 // `criterion_group!` expands to an undocumented `pub fn`.
@@ -531,12 +531,13 @@ fn align_vec(bytes: &[u8]) -> Vec<u8> {
 fn kernels(c: &mut Criterion) {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
-        let avx2 = std::env::var("SEMLOC_NN_AVX2").is_ok_and(|v| v == "1");
-        semloc_core::nn::simd::limit_to_avx2(avx2);
-        println!(
-            "x86-64 kernels: AVX-512 VNNI {}",
-            if semloc_core::nn::simd::vnni_available() && !avx2 { "used" } else { "not used" }
-        );
+        use semloc_core::nn::simd::{isa, set_max_isa, Isa};
+        match std::env::var("SEMLOC_NN_ISA").as_deref() {
+            Ok("portable") => set_max_isa(Isa::Portable),
+            Ok("avx2") => set_max_isa(Isa::Avx2),
+            _ => set_max_isa(Isa::Avx512Vnni),
+        }
+        println!("x86-64 fast kernels: {:?}", isa());
     }
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let mut ops = build(&mut rng);

@@ -18,7 +18,7 @@
 //! the general conv, channel vectors for depthwise, one input row per pixel for the 1×1 GEMM).
 //! The depthwise kernel keeps a 64-channel `i32` accumulator block on the stack (256 bytes).
 
-use super::quant::clamp_range;
+use super::quant::{clamp_range, fits_simd_requant as fits_requant_lanes, Lanes8};
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
 use super::quant::{fits_simd_requant, simd_allowed};
 use super::{check_param, check_tensor, check_zero_point, NnError, Requant, Shape, MAX_REDUCTION};
@@ -280,6 +280,8 @@ pub fn depthwise3x3_reference(
 
 /// Channels per accumulator block of the fast depthwise kernel.
 const DW_BLOCK: usize = 64;
+/// Channel groups of 8 whose requantisers the portable depthwise kernel keeps in lane form.
+const DW_LANE_GROUPS: usize = 32;
 
 /// Depthwise 3×3, fast. On x86-64 with AVX2: [`super::simd`]'s kernel (8 channels per vector;
 /// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation). Portable:
@@ -336,6 +338,15 @@ fn depthwise3x3_portable(
     let zp = q.input_zero_point;
     let out = &mut out[..os.len()];
     let mut acc = [0i32; DW_BLOCK];
+    // the requantisers of up to 256 channels in lane form (6 KiB), when the vector form holds
+    let mut l8 = [Lanes8::new(&[]); DW_LANE_GROUPS];
+    let lanes =
+        (c <= 8 * DW_LANE_GROUPS && fits_requant_lanes(9 * 255 * 127, b, q.requant)).then(|| {
+            for (l, r) in l8.iter_mut().zip(q.requant.chunks(8)) {
+                *l = Lanes8::new(r);
+            }
+            &l8
+        });
     for (oy, orow) in out.chunks_exact_mut(os.w * c).enumerate() {
         let (ky0, ky1) = tap_range(oy, stride, 1, 3, xs.h);
         for (ox, opix) in orow.chunks_exact_mut(c).enumerate() {
@@ -358,13 +369,26 @@ fn depthwise3x3_portable(
                         }
                     }
                 }
-                for (((o, &a), &bias), rq) in opix[c0..c0 + n]
-                    .iter_mut()
-                    .zip(acc.iter())
-                    .zip(&b[c0..c0 + n])
-                    .zip(&q.requant[c0..c0 + n])
-                {
-                    *o = rq.to_i8(a.saturating_add(bias), q.output_zero_point, lo, hi);
+                if let Some(l8) = &lanes {
+                    // 8 channels at a time, branch-free (the biases cannot saturate here)
+                    for (j, (o, a)) in opix[c0..c0 + n].chunks_mut(8).zip(acc.chunks(8)).enumerate()
+                    {
+                        let ch = c0 + 8 * j;
+                        let v: [i32; 8] = core::array::from_fn(|t| {
+                            a.get(t).copied().unwrap_or(0) + b.get(ch + t).copied().unwrap_or(0)
+                        });
+                        let r = l8[ch / 8].requant(&v, q.output_zero_point, lo, hi);
+                        o.copy_from_slice(&r[..o.len()]);
+                    }
+                } else {
+                    for (((o, &a), &bias), rq) in opix[c0..c0 + n]
+                        .iter_mut()
+                        .zip(acc.iter())
+                        .zip(&b[c0..c0 + n])
+                        .zip(&q.requant[c0..c0 + n])
+                    {
+                        *o = rq.to_i8(a.saturating_add(bias), q.output_zero_point, lo, hi);
+                    }
                 }
                 c0 += n;
             }
@@ -530,46 +554,107 @@ pub fn pointwise_fast(
 /// rows are staged and summed in pieces.
 const PW_STAGE: usize = 1024;
 
-/// The portable GEMM: per pixel the input row is staged once as `i32` with the zero point
-/// subtracted, then each 8-channel block is 8 independent reductions over the packed groups
-/// (the inner `[i32; 8]` update is what the auto-vectoriser turns into SIMD lanes).
+/// The portable GEMM. Per 8-channel block the packed panel is unpacked once into 8 plain
+/// weight rows (stack, up to 1024 inputs each); per pixel the input row is staged as `i16`
+/// minus the zero point and multiplied with four weight rows at a time in one zipped loop (the
+/// shape of loop the auto-vectoriser turns into `pmaddwd` / `smlal`), then the block is
+/// requantised 8 lanes at a time ([`Lanes8`], branch-free). Rows wider than 1024 take
+/// [`pointwise_portable_wide`].
 fn pointwise_portable(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i8]) {
+    let ci = xs.c;
+    if ci > PW_STAGE {
+        return pointwise_portable_wide(x, xs, w, b, q, out);
+    }
+    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
+    let co = b.len();
+    let zp = q.input_zero_point;
+    let zo = q.output_zero_point;
+    let lanes = PW_BLOCK * PW_GROUP;
+    let panel = ci.div_ceil(PW_GROUP) * lanes;
+    let vector = fits_requant_lanes(ci as i64 * 255 * 127, b, q.requant);
+    let mut wt = [0i8; PW_BLOCK * PW_STAGE];
+    let mut st = [0i16; PW_STAGE];
+    let x = &x[..xs.len()];
+    for (block, wp) in w.chunks_exact(panel).enumerate() {
+        let k0 = block * PW_BLOCK;
+        let nb = (co - k0).min(PW_BLOCK);
+        // unpack: wt[j·ci + k] = w[k0 + j][k] (padding channels stay 0)
+        let wt = &mut wt[..PW_BLOCK * ci];
+        for (g, chunk) in wp.chunks_exact(lanes).enumerate() {
+            for (j, lane) in chunk.chunks_exact(PW_GROUP).enumerate() {
+                for (t, &v) in lane.iter().enumerate() {
+                    let k = g * PW_GROUP + t;
+                    if k < ci {
+                        wt[j * ci + k] = v;
+                    }
+                }
+            }
+        }
+        let lanes8 = Lanes8::new(&q.requant[k0..k0 + nb]);
+        let mut bias = [0i32; PW_BLOCK];
+        bias[..nb].copy_from_slice(&b[k0..k0 + nb]);
+        let (w0, w1) = wt.split_at(4 * ci);
+        for (p, xr) in x.chunks_exact(ci).enumerate() {
+            let st = &mut st[..ci];
+            for (s, &v) in st.iter_mut().zip(xr) {
+                *s = v as i16 - zp as i16;
+            }
+            let a = dot4(st, w0);
+            let c = dot4(st, w1);
+            let acc = [a[0], a[1], a[2], a[3], c[0], c[1], c[2], c[3]];
+            let ob = &mut out[p * co + k0..p * co + k0 + nb];
+            if vector {
+                let v = lanes8.requant(&core::array::from_fn(|j| acc[j] + bias[j]), zo, lo, hi);
+                ob.copy_from_slice(&v[..nb]);
+            } else {
+                for (t, o) in ob.iter_mut().enumerate() {
+                    *o = q.requant[k0 + t].to_i8(acc[t].saturating_add(bias[t]), zo, lo, hi);
+                }
+            }
+        }
+    }
+}
+
+/// Four dot products of one staged input row with four weight rows, in one zipped loop.
+/// `i16 × i8 → i32` with `|x − zp| ≤ 255` is what `pmaddwd` / `smlal` do, and LLVM finds them.
+#[inline]
+fn dot4(xr: &[i16], w4: &[i8]) -> [i32; 4] {
+    let ci = xr.len();
+    let (w0, r) = w4.split_at(ci);
+    let (w1, r) = r.split_at(ci);
+    let (w2, w3) = r.split_at(ci);
+    let (mut a0, mut a1, mut a2, mut a3) = (0i32, 0i32, 0i32, 0i32);
+    for ((((&xv, &v0), &v1), &v2), &v3) in xr.iter().zip(w0).zip(w1).zip(w2).zip(w3) {
+        let xv = xv as i32;
+        a0 += xv * v0 as i32;
+        a1 += xv * v1 as i32;
+        a2 += xv * v2 as i32;
+        a3 += xv * v3 as i32;
+    }
+    [a0, a1, a2, a3]
+}
+
+/// The portable GEMM for rows wider than the stage: one dot product per output, straight
+/// from the packed layout.
+fn pointwise_portable_wide(
+    x: &[i8],
+    xs: Shape,
+    w: &[i8],
+    b: &[i32],
+    q: &ConvQuant<'_>,
+    out: &mut [i8],
+) {
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
     let ci = xs.c;
     let co = b.len();
     let zp = q.input_zero_point;
-    let zo = q.output_zero_point;
-    let groups = ci.div_ceil(PW_GROUP);
-    let panel = groups * PW_BLOCK * PW_GROUP;
-    let mut stage = [0i32; PW_STAGE];
     for (xr, orow) in x[..xs.len()].chunks_exact(ci).zip(out.chunks_exact_mut(co)) {
-        for (block, (wp, ob)) in w.chunks_exact(panel).zip(orow.chunks_mut(PW_BLOCK)).enumerate() {
-            let mut acc = [0i32; PW_BLOCK];
-            // the row in pieces of whole groups that fit the stage
-            let mut c0 = 0;
-            while c0 < ci {
-                let len = (ci - c0).min(PW_STAGE);
-                let st = &mut stage[..len.div_ceil(PW_GROUP) * PW_GROUP];
-                st.fill(0);
-                for (s, &v) in st.iter_mut().zip(&xr[c0..c0 + len]) {
-                    *s = v as i32 - zp;
-                }
-                let wq = &wp[c0 / PW_GROUP * PW_BLOCK * PW_GROUP..];
-                for (xg, wg) in st.chunks_exact(PW_GROUP).zip(wq.chunks_exact(PW_BLOCK * PW_GROUP))
-                {
-                    for (a, wl) in acc.iter_mut().zip(wg.chunks_exact(PW_GROUP)) {
-                        *a += xg[0] * wl[0] as i32
-                            + xg[1] * wl[1] as i32
-                            + xg[2] * wl[2] as i32
-                            + xg[3] * wl[3] as i32;
-                    }
-                }
-                c0 += len;
+        for (c, o) in orow.iter_mut().enumerate() {
+            let mut acc = 0i32;
+            for (k, &xv) in xr.iter().enumerate() {
+                acc += (xv as i32 - zp) * w[pointwise_packed_index(c, k, ci)] as i32;
             }
-            let k0 = block * PW_BLOCK;
-            for (t, (o, &a)) in ob.iter_mut().zip(&acc).enumerate() {
-                *o = q.requant[k0 + t].to_i8(a.saturating_add(b[k0 + t]), zo, lo, hi);
-            }
+            *o = q.requant[c].to_i8(acc.saturating_add(b[c]), q.output_zero_point, lo, hi);
         }
     }
 }

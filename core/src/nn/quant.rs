@@ -169,11 +169,16 @@ std::thread_local! {
     pub(crate) static FORCE_PORTABLE: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
 }
 
-/// Whether the kernels may take their SIMD paths: always, except in tests that force the
-/// portable ones (so both are checked against the reference on x86-64).
+/// Whether the kernels may take their SIMD paths: unless capped to the portable ones
+/// (`simd::set_max_isa`) or, in tests, forced to them on this thread (so both are checked
+/// against the reference on x86-64).
 #[inline]
 #[cfg_attr(not(all(target_arch = "x86_64", target_feature = "avx2")), allow(dead_code))]
 pub(crate) fn simd_allowed() -> bool {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if !super::simd::simd_enabled() {
+        return false;
+    }
     #[cfg(test)]
     {
         !FORCE_PORTABLE.with(|f| f.get())
@@ -191,6 +196,50 @@ pub(crate) fn portable<R>(f: impl FnOnce() -> R) -> R {
     let r = f();
     FORCE_PORTABLE.with(|p| p.set(false));
     r
+}
+
+/// The requantisers of 8 lanes in a branch-free form (the same integers as
+/// [`Requant::apply`]) that the auto-vectoriser maps onto SIMD lanes: `vpmuldq` / `smull` for
+/// the 64-bit products, per-lane shifts. For the portable kernels; valid under
+/// [`fits_simd_requant`] like the x86 vector code (it is the same arithmetic).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lanes8 {
+    m: [i64; 8],
+    left: [u32; 8],
+    right: [u32; 8],
+    mask: [i32; 8],
+    half: [i32; 8],
+}
+
+impl Lanes8 {
+    /// From up to 8 requantisers (missing lanes: zero).
+    pub(crate) fn new(r: &[Requant]) -> Self {
+        let mut l = Lanes8 { m: [0; 8], left: [0; 8], right: [0; 8], mask: [0; 8], half: [0; 8] };
+        for (i, q) in r.iter().take(8).enumerate() {
+            let e = (-q.shift).clamp(0, 31) as u32;
+            l.m[i] = q.multiplier as i64;
+            l.left[i] = q.shift.clamp(0, 30) as u32;
+            l.right[i] = e;
+            l.mask[i] = ((1i64 << e) - 1) as i32;
+            l.half[i] = l.mask[i] >> 1;
+        }
+        l
+    }
+
+    /// `clamp(zp + apply(x), lo, hi)` for the 8 lanes (`|x| · 2^left ≤ 2^30`).
+    #[inline]
+    pub(crate) fn requant(&self, x: &[i32; 8], zp: i32, lo: i32, hi: i32) -> [i8; 8] {
+        let mut out = [0i8; 8];
+        for l in 0..8 {
+            let v = x[l] << self.left[l];
+            // SRDHM: floor((v·M + 2^30) / 2^31), whatever the sign (see simd's module docs)
+            let s = ((v as i64 * self.m[l] + (1 << 30)) >> 31) as i32;
+            // RoundingDivideByPOT, as rounding_divide_by_pot
+            let q = (s >> self.right[l]) + i32::from((s & self.mask[l]) > self.half[l] - (s >> 31));
+            out[l] = (q + zp).clamp(lo, hi) as i8;
+        }
+        out
+    }
 }
 
 /// The per-input requantisers of TFLite's quantised `Add` (left shift 20): see
@@ -295,6 +344,33 @@ mod tests {
         // frequent only for right shifts of 1..3 (scales in [1/16, 1/2)), where the first step
         // is coarse; the network's scales are ~2^-8 and smaller
         std::println!("double vs single rounding differ in {single_rounding_mismatches} of {n}");
+    }
+
+    #[test]
+    fn lanes8_equals_the_scalar_requantisation() {
+        let mut rng = Rng::new(0x1a7e);
+        for i in 0..20_000 {
+            let rq: [Requant; 8] = core::array::from_fn(|_| {
+                let s = if i % 4 == 0 {
+                    1.0 / (1u64 << rng.int(0, 31)) as f64
+                } else {
+                    libm::exp(rng.f64(-22.0, 6.0))
+                };
+                Requant::from_scale(s)
+            });
+            let x: [i32; 8] = core::array::from_fn(|l| {
+                let bound = SIMD_REQUANT_BOUND >> rq[l].shift.clamp(0, 30);
+                match rng.int(0, 2) {
+                    0 => rng.int(-300, 300) as i32,
+                    1 => rng.int(-bound, bound) as i32,
+                    _ => [-bound, bound, -1, 0][rng.usize(0, 3)] as i32,
+                }
+            });
+            let (zp, relu) = (rng.zp(), rng.int(0, 1) == 1);
+            let (lo, hi) = clamp_range(zp, relu);
+            let want: [i8; 8] = core::array::from_fn(|l| rq[l].to_i8(x[l], zp, lo, hi));
+            assert_eq!(Lanes8::new(&rq).requant(&x, zp, lo, hi), want, "{rq:?} {x:?}");
+        }
     }
 
     #[test]

@@ -50,8 +50,20 @@ use super::Requant;
 
 /// 0: not probed yet, 1: AVX2 only, 2: AVX-512 VNNI usable.
 static DETECTED: AtomicU8 = AtomicU8::new(0);
-/// Set by [`limit_to_avx2`]: ignore VNNI even where present (benchmarks, tests).
-static AVX2_ONLY: AtomicU8 = AtomicU8::new(0);
+/// The most capable [`Isa`] the kernels may use, as set by [`set_max_isa`] (default: all).
+static MAX_ISA: AtomicU8 = AtomicU8::new(Isa::Avx512Vnni as u8);
+
+/// The instruction sets the fast kernels can run on, least capable first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[repr(u8)]
+pub enum Isa {
+    /// The portable kernels (safe Rust; auto-vectorised for AVX2 by this build).
+    Portable = 0,
+    /// The AVX2 intrinsics kernels.
+    Avx2 = 1,
+    /// AVX2, with AVX-512 VNNI for the 1×1 GEMM.
+    Avx512Vnni = 2,
+}
 
 fn detect_vnni() -> bool {
     // CPUID.1:ECX.OSXSAVE, then XCR0 has SSE, AVX, opmask, ZMM_Hi256, Hi16_ZMM state enabled
@@ -86,15 +98,33 @@ pub fn vnni_available() -> bool {
     }
 }
 
-/// Makes the kernels ignore AVX-512 VNNI (`true`) or use it where present (`false`, the
-/// default). Results are the same integers either way; this exists to measure and test the
-/// AVX2 path on a VNNI machine.
-pub fn limit_to_avx2(on: bool) {
-    AVX2_ONLY.store(on as u8, Ordering::Relaxed);
+/// Caps the instruction set the fast kernels use (process-wide; default: the best the CPU
+/// has). Results are the same integers on every level; this exists to measure (and compare)
+/// the portable and AVX2 kernels on a machine that has more.
+pub fn set_max_isa(isa: Isa) {
+    MAX_ISA.store(isa as u8, Ordering::Relaxed);
+}
+
+/// The instruction set the fast kernels use now: the CPU's best, capped by [`set_max_isa`].
+pub fn isa() -> Isa {
+    let max = MAX_ISA.load(Ordering::Relaxed);
+    if max >= Isa::Avx512Vnni as u8 && vnni_available() {
+        Isa::Avx512Vnni
+    } else if max >= Isa::Avx2 as u8 {
+        Isa::Avx2
+    } else {
+        Isa::Portable
+    }
 }
 
 fn use_vnni() -> bool {
-    AVX2_ONLY.load(Ordering::Relaxed) == 0 && vnni_available()
+    isa() == Isa::Avx512Vnni
+}
+
+/// Whether the AVX2 kernels may run (not capped to [`Isa::Portable`]).
+#[inline]
+pub(crate) fn simd_enabled() -> bool {
+    MAX_ISA.load(Ordering::Relaxed) != Isa::Portable as u8
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1386,15 +1416,24 @@ unsafe fn add_avx2(op: &AddOp<'_>, out: &mut [i8]) {
     let zo = _mm256_set1_epi32(op.zo);
     let lo = _mm256_set1_epi32(op.lo);
     let (pa, pb, po) = (op.a.as_ptr(), op.b.as_ptr(), out.as_mut_ptr());
+    let value = |va: __m256i, vb: __m256i| {
+        let xa = rdbpot8(srdhm20(_mm256_sub_epi32(va, z1), m1h, m1l), &r1);
+        let xb = rdbpot8(srdhm20(_mm256_sub_epi32(vb, z2), m2h, m2l), &r2);
+        finish8(_mm256_add_epi32(xa, xb), &ro, zo, lo)
+    };
     let mut i = 0;
+    while i + 32 <= n {
+        // SAFETY: i + 32 ≤ n elements in all three
+        let v = |j: usize| unsafe { value(load8(pa.add(i + j)), load8(pb.add(i + j))) };
+        let packed = pack32(v(0), v(8), v(16), v(24));
+        unsafe { _mm256_storeu_si256(po.add(i) as *mut __m256i, packed) };
+        i += 32;
+    }
     while i < n {
         let m = (n - i).min(8);
         // SAFETY: i + m ≤ n elements in all three
         let (va, vb) = unsafe { (load_n(pa.add(i), m), load_n(pb.add(i), m)) };
-        let xa = rdbpot8(srdhm20(_mm256_sub_epi32(va, z1), m1h, m1l), &r1);
-        let xb = rdbpot8(srdhm20(_mm256_sub_epi32(vb, z2), m2h, m2l), &r2);
-        let v = finish8(_mm256_add_epi32(xa, xb), &ro, zo, lo);
-        unsafe { store8(po.add(i), v, m) };
+        unsafe { store8(po.add(i), value(va, vb), m) };
         i += 8;
     }
 }
