@@ -16,7 +16,15 @@
 //! The fast kernels compute the same integers: valid tap ranges are hoisted out of the inner
 //! loops, which run over contiguous NHWC slices (`kw_valid · c_in` input bytes per kernel row for
 //! the general conv, channel vectors for depthwise, one input row per pixel for the 1×1 GEMM).
-//! The depthwise kernel keeps a 64-channel `i32` accumulator block on the stack (256 bytes).
+//! On x86-64 with AVX2 the 1×1 GEMM, the depthwise conv and the one-channel 3×3 conv run as
+//! `nn::simd` kernels (see there); elsewhere, and whenever an op's accumulators could
+//! saturate the plain vector arithmetic ([`super::quant::fits_simd_requant`], never for a real
+//! network), the portable ones. Stack: the portable depthwise kernel a 64-channel `i32`
+//! accumulator block and lane-form requantisers (6.3 KiB), the portable GEMM an unpacked
+//! 8-channel weight panel and a staged row (10 KiB).
+//!
+//! **1×1 weights are packed** ([`pack_pointwise`], `[⌈O/8⌉][⌈I/4⌉][8][4]`), the layout the
+//! model blob stores; the reference reads them through [`pointwise_packed_index`].
 
 use super::quant::{clamp_range, fits_simd_requant as fits_requant_lanes, Lanes8};
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
@@ -150,7 +158,7 @@ fn tap_range(o: usize, stride: usize, pad: usize, k: usize, n: usize) -> (usize,
 /// General conv, fast: per output pixel the valid kernel rows are contiguous NHWC runs of
 /// `kw_valid · c_in` bytes in both input and weights, so each is one dot product. On x86-64
 /// with AVX2 a 3×3 conv of a one-channel input (the network's first layer) takes
-/// [`super::simd`]'s kernel: five `vpmaddwd` per 8 output channels and pixel.
+/// `nn::simd`'s kernel: five `vpmaddwd` per 8 output channels and pixel.
 #[allow(clippy::too_many_arguments)]
 pub fn conv2d_fast(
     x: &[i8],
@@ -283,7 +291,7 @@ const DW_BLOCK: usize = 64;
 /// Channel groups of 8 whose requantisers the portable depthwise kernel keeps in lane form.
 const DW_LANE_GROUPS: usize = 32;
 
-/// Depthwise 3×3, fast. On x86-64 with AVX2: [`super::simd`]'s kernel (8 channels per vector;
+/// Depthwise 3×3, fast. On x86-64 with AVX2: `nn::simd`'s kernel (8 channels per vector;
 /// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation). Portable:
 /// per output pixel and 64-channel block, each valid tap adds a whole channel vector
 /// (`x[iy, ix, c..]·w[ky, kx, c..]`) to a stack accumulator, which auto-vectorises.
@@ -516,7 +524,7 @@ pub fn pointwise_reference(
 }
 
 /// Pointwise 1×1 conv, fast: an int8 GEMM `out[p][co] = Σ_ci (x[p][ci] − zp)·w[co][ci]` with
-/// `i32` accumulation over the packed weights. On x86-64 with AVX2 it is [`super::simd`]'s
+/// `i32` accumulation over the packed weights. On x86-64 with AVX2 it is `nn::simd`'s
 /// register-tiled kernel (AVX-512 VNNI where the CPU has it) with vectorised requantisation;
 /// elsewhere (and for accumulators too large for the vector requantisation) the portable
 /// kernel below.

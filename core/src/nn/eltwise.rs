@@ -129,7 +129,7 @@ pub fn add_reference(
 }
 
 /// `Add`, fast: one zipped pass over the three slices; on x86-64 with AVX2 the three
-/// requantisations run on 8 lanes at a time ([`super::simd`]).
+/// requantisations run on 8 lanes at a time (`nn::simd`).
 pub fn add_fast(
     a: &[i8],
     b: &[i8],

@@ -9,7 +9,7 @@
 //! parses cannot make the executor fail.
 //!
 //! The host's converter (`semloc convert`) lowers the ONNX graph + `quant.json` to
-//! [`TensorSpec`]s and [`OpSpec`]s; [`plan_arena`] places the activations and [`write`] encodes
+//! [`TensorSpec`]s and [`OpSpec`]s; [`plan_arena`] places the activations and [`write()`] encodes
 //! them. Writer and parser live here together so there is one definition of the format.
 //!
 //! ## Layout (version 2, little-endian, offsets from the blob start)
@@ -32,7 +32,7 @@
 //! ```
 //!
 //! Weight layouts are those of the kernels: general conv `O·kh·kw·I`, depthwise `3·3·C`,
-//! pointwise **packed** (version 2; version 1 stored `O·I`): [`write`] takes `O·I` in the
+//! pointwise **packed** (version 2; version 1 stored `O·I`): [`write()`] takes `O·I` in the
 //! [`OpSpec`] and stores [`pack_pointwise`]'s `[⌈O/8⌉][⌈I/4⌉][8][4]` blocks (8 output channels
 //! × 4 input channels per 32 bytes, zero padding, `pointwise_packed_len(O, I)` bytes), the
 //! layout the 1×1 GEMM reads without copying; the parser hands that layout out (and rejects
@@ -256,7 +256,7 @@ pub enum OpSpec<'a> {
         /// Geometry (depthwise: 3x3, pad 1; pointwise: 1x1, stride 1, no pads).
         geometry: ConvGeometry,
         /// Weights. General conv `O·kh·kw·I`, depthwise `3·3·C`; pointwise: `O·I` when given
-        /// to [`write`], packed ([`pack_pointwise`]) when returned by the parser.
+        /// to [`write()`], packed ([`pack_pointwise`]) when returned by the parser.
         weights: &'a [i8],
         /// One `i32` bias per output channel (scale `s_in · s_w[c]`).
         bias: &'a [i32],
@@ -561,7 +561,7 @@ fn stored_weights_len(tensors: &[TensorSpec], op: &OpSpec<'_>) -> usize {
     }
 }
 
-/// Bytes [`write`] needs for this graph.
+/// Bytes [`write()`] needs for this graph.
 pub fn encoded_len(tensors: &[TensorSpec], ops: &[OpSpec<'_>]) -> usize {
     let mut data = 0usize;
     for op in ops {

@@ -18,6 +18,13 @@
 //! With the network's scales (`m ≲ 2^-6`, `e ≥ 6`) the first step is fine-grained and such
 //! ties are rare. This is the rounding of every TFLite int8 kernel, so results match TFLite
 //! bit for bit.
+//!
+//! **Vector forms.** gemmlowp's step 2 is exactly `floor((x·M + 2^30) / 2^31)` for either sign
+//! (its sign-dependent nudge and truncation amount to that), which needs no compare; steps 1 and
+//! 3 vectorise as they stand. The SIMD kernels (`nn::simd`) and the portable `Lanes8` compute
+//! 8 lanes that way with plain (wrapping) adds and shifts, which equal the saturating ones
+//! whenever `|acc + bias| · 2^left ≤ 2^30` — [`fits_simd_requant`], checked once per op from the
+//! reduction length and the largest bias (else the scalar [`Requant::to_i8`] runs).
 
 /// A real scale as a Q0.31 multiplier and a power-of-two shift: `scale ≈ multiplier · 2^(shift−31)`.
 ///

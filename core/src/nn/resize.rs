@@ -110,7 +110,7 @@ pub fn resize_bilinear_reference(
     Ok(os)
 }
 
-/// Bilinear resize, fast. On x86-64 with AVX2 (outputs up to 2048 wide): [`super::simd`]'s
+/// Bilinear resize, fast. On x86-64 with AVX2 (outputs up to 2048 wide): `nn::simd`'s
 /// separable kernel — each source row blended in `x` once per chunk of output columns, each
 /// output row then one flat blend in `y` and requantisation of 8 values at a time, whatever
 /// the channel count. Portable: taps hoisted per row / pixel, channel vectors blended in one
