@@ -44,9 +44,10 @@
 //!
 //! **Memory.** No kernel allocates: inputs, weights and outputs are caller-provided slices. The
 //! only scratch is on the stack and fixed. Portable kernels: a 64-entry `i32` accumulator block
-//! (depthwise, pool: 256 B) and a 1024-entry `i32` staged input row (pointwise: 4 KiB). The x86
-//! kernels (hosts only): 8 KiB staged input tile (VNNI GEMM), 18 KiB of per-group constants
-//! (depthwise), 40 KiB of staged rows and column taps (resize), 3 KiB (first conv). Shapes,
+//! (pool: 256 B; depthwise: plus lane-form requantisers, 6.3 KiB) and an unpacked weight panel
+//! with a staged `i16` row (pointwise: 10 KiB). The x86 kernels (hosts only): 8 KiB staged
+//! input tile (VNNI GEMM), 12 + 7 KiB (AVX2 GEMM), 21 KiB of per-group constants (depthwise),
+//! 16 KiB of staged row chunks and 24 KiB of column taps (resize), 3 KiB (first conv). Shapes,
 //! slice lengths and zero points are checked once at entry and reported as [`NnError`]; the
 //! kernels do not panic on bad shapes or parameters.
 //!

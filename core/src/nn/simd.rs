@@ -849,7 +849,7 @@ struct DwGroup {
     nb: usize,
 }
 
-/// Groups whose constants the depthwise kernel keeps at once (18 KiB of stack): 256 channels,
+/// Groups whose constants the depthwise kernel keeps at once (21 KiB of stack): 256 channels,
 /// more than any layer of the network has, so one pass over the pixels.
 const DW_GROUPS: usize = 32;
 
@@ -1215,7 +1215,7 @@ unsafe fn conv1_avx2(a: &Conv1<'_>, out: &mut [i8]) {
 
 /// `i32`s per chunk of an output row in the resize kernel (two stacked chunks: 16 KiB).
 const RESIZE_CHUNK: usize = 2048;
-/// Widest output of the SIMD resize (its x taps are tabulated once per call, 8 KiB).
+/// Widest output of the SIMD resize (its x taps are tabulated once per call, 24 KiB).
 pub(crate) const RESIZE_MAX_OW: usize = 2048;
 /// Most channels of the SIMD resize (a chunk holds at least one output pixel).
 pub(crate) const RESIZE_MAX_C: usize = RESIZE_CHUNK - 16;
