@@ -36,6 +36,12 @@ enum Command {
     Bench(cli::bench::BenchArgs),
     /// Write a synthetic KITTI-layout stereo sequence with traffic, GT poses and labels.
     Synth(cli::synth::SynthArgs),
+    /// Convert a float ONNX export + its quant.json to the int8 .slm blob the core runs.
+    Convert(cli::convert::ConvertArgs),
+    /// Label images with the int8 network: class-id maps and colour overlays.
+    Segment(cli::segment::SegmentArgs),
+    /// Compare the int8 network with its float ONNX (tract): label agreement, CamVid mIoU.
+    VerifySeg(cli::verify_seg::VerifySegArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -47,6 +53,9 @@ fn main() -> std::process::ExitCode {
         Command::Bench(args) => cli::bench::run(&args),
         Command::Demo(args) => cli::demo::run(&args),
         Command::Synth(args) => cli::synth::run(&args),
+        Command::Convert(args) => cli::convert::run(&args),
+        Command::Segment(args) => cli::segment::run(&args),
+        Command::VerifySeg(args) => cli::verify_seg::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

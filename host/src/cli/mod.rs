@@ -1,11 +1,14 @@
 //! Subcommands of the `semloc` binary.
 
 pub mod bench;
+pub mod convert;
 pub mod demo;
 pub mod eval;
 pub mod info;
 pub mod run;
+pub mod segment;
 pub mod synth;
+pub mod verify_seg;
 
 /// A bar for work that takes over a second; indicatif hides it when stderr is not a terminal,
 /// so logs and CI output stay clean.

@@ -1,0 +1,235 @@
+//! `semloc verify-seg`: the int8 engine against its float reference on real images.
+//!
+//! Per image: the core int8 network (fast kernels), on the first `--reference-check` images
+//! also the reference kernels (the logits must be bit-identical, else the command fails), and
+//! the float ONNX in tract on the same input map. Reports the pixel label agreement int8 vs
+//! f32 and, on CamVid (labels in `<split>annot/`), mIoU and category mIoU of both and the
+//! difference — the figures `models/quantise.py` estimates with its int8 simulation.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use image::GrayImage;
+use semloc::dataset::luma::load_luma_file;
+use semloc::nn::metrics::{Confusion, CATEGORIES};
+use semloc::nn::segment::{to_frame, Segmenter};
+use semloc::nn::tract_ref::TractRef;
+use semloc::nn::{NnFileError, SlmBlob};
+use semloc_core::nn::graph::Kernels;
+use semloc_core::seg::{CLASS_NAMES, VOID};
+
+use super::run::{percentiles, Percentiles};
+use super::segment::list_images;
+
+/// Arguments of `semloc verify-seg`.
+#[derive(Args, Debug)]
+pub struct VerifySegArgs {
+    /// The int8 model (`semloc convert`).
+    #[arg(long, value_name = "X.slm")]
+    pub model: PathBuf,
+    /// The float ONNX it was converted from.
+    #[arg(long, value_name = "X.onnx")]
+    pub onnx: PathBuf,
+    /// CamVid root (holding `<split>/` and `<split>annot/`): adds mIoU against the labels.
+    #[arg(long, value_name = "DIR", required_unless_present = "kitti", conflicts_with = "kitti")]
+    pub camvid: Option<PathBuf>,
+    /// CamVid split.
+    #[arg(long, default_value = "val", value_name = "SPLIT")]
+    pub split: String,
+    /// A KITTI sequence folder (or a folder of images): agreement only, no labels.
+    #[arg(long, value_name = "SEQUENCE_DIR")]
+    pub kitti: Option<PathBuf>,
+    /// Only the first N images.
+    #[arg(long, value_name = "N")]
+    pub limit: Option<usize>,
+    /// Check fast against reference kernels (bit-identical logits) on the first N images.
+    #[arg(long, default_value_t = 3, value_name = "N")]
+    pub reference_check: usize,
+    /// Also write the figures as JSON here.
+    #[arg(long, value_name = "FILE")]
+    pub json: Option<PathBuf>,
+}
+
+/// mIoU figures of one engine.
+#[derive(Debug, serde::Serialize)]
+struct Scores {
+    miou: f64,
+    category_miou: f64,
+    pixel_accuracy: f64,
+    iou: std::collections::BTreeMap<&'static str, f64>,
+    category_iou: std::collections::BTreeMap<&'static str, f64>,
+}
+
+impl Scores {
+    fn of(c: &Confusion) -> Self {
+        let names = |v: Vec<f64>, n: &[&'static str]| n.iter().copied().zip(v).collect();
+        let cat_names: Vec<&'static str> = CATEGORIES.iter().map(|c| c.0).collect();
+        Scores {
+            miou: c.miou(),
+            category_miou: c.category_miou(),
+            pixel_accuracy: c.pixel_accuracy(),
+            iou: names(c.iou(), &CLASS_NAMES),
+            category_iou: names(c.category_iou(), &cat_names),
+        }
+    }
+}
+
+#[derive(Debug, serde::Serialize)]
+struct Report {
+    model: PathBuf,
+    onnx: PathBuf,
+    images: usize,
+    input_hw: (usize, usize),
+    letterbox_factor: usize,
+    reference_checked: usize,
+    agreement_pct: f64,
+    min_image_agreement_pct: f64,
+    int8_ms: Percentiles,
+    tract_f32_ms: Percentiles,
+    int8: Option<Scores>,
+    f32: Option<Scores>,
+    miou_drop: Option<f64>,
+    category_miou_drop: Option<f64>,
+}
+
+/// Runs `semloc verify-seg`.
+pub fn run(args: &VerifySegArgs) -> Result<()> {
+    let (mut images, annot) = match (&args.camvid, &args.kitti) {
+        (Some(root), _) => {
+            let dir = root.join(&args.split);
+            (list_images(&dir)?, Some(root.join(format!("{}annot", args.split))))
+        }
+        (None, Some(k)) => (list_images(k)?, None),
+        (None, None) => bail!("give --camvid DIR or --kitti SEQUENCE_DIR"),
+    };
+    if let Some(n) = args.limit {
+        images.truncate(n);
+    }
+    if images.is_empty() {
+        bail!("no images to verify");
+    }
+    let mut seg = Segmenter::new(SlmBlob::load(&args.model)?)?;
+    let tract = TractRef::load(&args.onnx)?;
+    let (mut c8, mut c32) = (Confusion::default(), Confusion::default());
+    let (mut same, mut total, mut min_agree) = (0u64, 0u64, f64::INFINITY);
+    let (mut ms8, mut ms32) = (Vec::new(), Vec::new());
+    let mut factor = 0;
+    let pb = super::progress(images.len() as u64, "verify");
+    for (i, path) in images.iter().enumerate() {
+        let frame = load_luma_file(path)?;
+        let (w, h) = frame.dimensions();
+        let t = Instant::now();
+        let labels = seg.segment(&frame, Kernels::Fast)?;
+        ms8.push(t.elapsed().as_secs_f64() * 1e3);
+        if i < args.reference_check {
+            let diff = seg.compare_kernels()?;
+            if diff > 0 {
+                bail!(
+                    "{}: fast and reference kernels differ in {diff} output logits (must be \
+                     bit-identical)",
+                    path.display()
+                );
+            }
+        }
+        let lb = seg.letterbox(w as usize, h as usize)?;
+        factor = lb.factor;
+        let t = Instant::now();
+        let f32_model = seg.reference(&tract)?;
+        ms32.push(t.elapsed().as_secs_f64() * 1e3);
+        let f32_frame =
+            to_frame(&f32_model, &lb).map_err(|e| NnFileError::model(&args.model, e))?;
+        let s = labels.frame.iter().zip(&f32_frame).filter(|(a, b)| a == b).count() as u64;
+        min_agree = min_agree.min(100.0 * s as f64 / f32_frame.len() as f64);
+        same += s;
+        total += f32_frame.len() as u64;
+        if let Some(dir) = &annot {
+            let truth = load_truth(dir, path, w, h)?;
+            c8.add(truth.as_raw(), &labels.frame);
+            c32.add(truth.as_raw(), &f32_frame);
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let scored = annot.is_some();
+    let (s8, s32) = (scored.then(|| Scores::of(&c8)), scored.then(|| Scores::of(&c32)));
+    let report = Report {
+        model: args.model.clone(),
+        onnx: args.onnx.clone(),
+        images: images.len(),
+        input_hw: seg.input_size(),
+        letterbox_factor: factor,
+        reference_checked: args.reference_check.min(images.len()),
+        agreement_pct: 100.0 * same as f64 / total.max(1) as f64,
+        min_image_agreement_pct: min_agree,
+        int8_ms: percentiles(&ms8),
+        tract_f32_ms: percentiles(&ms32),
+        miou_drop: s8.as_ref().zip(s32.as_ref()).map(|(a, b)| b.miou - a.miou),
+        category_miou_drop: s8
+            .as_ref()
+            .zip(s32.as_ref())
+            .map(|(a, b)| b.category_miou - a.category_miou),
+        int8: s8,
+        f32: s32,
+    };
+    print_report(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(())
+}
+
+/// The CamVid label map of `image` (`<annot>/<stem>.png`, 8-bit class ids, ids > 11 read as
+/// void, as `camvid.py`).
+fn load_truth(annot: &Path, image: &Path, w: u32, h: u32) -> Result<GrayImage> {
+    let stem = image.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+    let p = annot.join(format!("{stem}.png"));
+    let img = image::open(&p).map_err(|e| match e {
+        image::ImageError::IoError(io) => anyhow::Error::new(NnFileError::io(&p, &io)),
+        e => anyhow::anyhow!("{}: cannot decode labels: {e}", p.display()),
+    })?;
+    let image::DynamicImage::ImageLuma8(mut g) = img else {
+        bail!("{}: labels must be 8-bit grey class ids", p.display());
+    };
+    if g.dimensions() != (w, h) {
+        bail!("{}: labels are {:?}, the image {w}x{h}", p.display(), g.dimensions());
+    }
+    for v in g.iter_mut() {
+        *v = (*v).min(VOID);
+    }
+    Ok(g)
+}
+
+fn print_report(r: &Report) {
+    println!(
+        "{} images, model input {}x{} (letterbox factor {}), fast = reference kernels on the \
+         first {} (bit-identical)",
+        r.images, r.input_hw.0, r.input_hw.1, r.letterbox_factor, r.reference_checked
+    );
+    println!(
+        "label agreement int8 vs f32: {:.3} % of pixels (worst image {:.3} %)",
+        r.agreement_pct, r.min_image_agreement_pct
+    );
+    println!(
+        "time per frame (1 thread): int8 median {:.1} ms, tract f32 median {:.1} ms",
+        r.int8_ms.median_ms, r.tract_f32_ms.median_ms
+    );
+    if let (Some(a), Some(b)) = (&r.int8, &r.f32) {
+        println!("{:<14}{:>10}{:>10}", "IoU [%]", "int8", "f32");
+        for k in CLASS_NAMES {
+            println!("{k:<14}{:>10.2}{:>10.2}", 100.0 * a.iou[k], 100.0 * b.iou[k]);
+        }
+        println!(
+            "mIoU: int8 {:.2} %, f32 {:.2} % (drop {:.2}); category mIoU: int8 {:.2} %, f32 {:.2} % \
+             (drop {:.2})",
+            100.0 * a.miou,
+            100.0 * b.miou,
+            100.0 * (b.miou - a.miou),
+            100.0 * a.category_miou,
+            100.0 * b.category_miou,
+            100.0 * (b.category_miou - a.category_miou)
+        );
+    }
+}

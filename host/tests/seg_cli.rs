@@ -1,0 +1,135 @@
+//! The segmentation subcommands end to end on a tiny synthetic network (no outside data):
+//! `convert`, `segment`, `verify-seg`, and their errors naming the file.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use semloc::nn::fixtures::write_tiny;
+
+fn semloc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A smooth grey test image with some structure.
+fn write_image(path: &Path, w: u32, h: u32) {
+    let img = image::GrayImage::from_fn(w, h, |x, y| {
+        let v = 128.0 + 90.0 * ((x as f32 * 0.31).sin() * (y as f32 * 0.23).cos());
+        image::Luma([v as u8])
+    });
+    img.save(path).unwrap();
+}
+
+/// Converts the tiny net (input 24x32) into `dir/tiny.slm`.
+fn tiny_model(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let onnx = write_tiny(dir, "tiny", 24, 32).unwrap();
+    let slm = dir.join("tiny.slm");
+    let o = semloc(&["convert", "--onnx", s(&onnx), "--out", s(&slm)]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = text(&o);
+    for want in ["tensors 10, ops 9", "MACs", "arena peak", "CRC-32 0x"] {
+        assert!(out.contains(want), "missing {want:?} in:\n{out}");
+    }
+    (onnx, slm)
+}
+
+#[test]
+fn convert_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nope.onnx");
+    let o = semloc(&["convert", "--onnx", s(&missing), "--out", s(&dir.path().join("x.slm"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains(&format!("{}: missing file", missing.display())), "{}", text(&o));
+
+    // an ONNX without its quant.json
+    let onnx = write_tiny(dir.path(), "a", 8, 8).unwrap();
+    std::fs::remove_file(dir.path().join("a.quant.json")).unwrap();
+    let o = semloc(&["convert", "--onnx", s(&onnx), "--out", s(&dir.path().join("x.slm"))]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("a.quant.json: missing file"), "{}", text(&o));
+}
+
+#[test]
+fn segment_writes_labels_and_overlays_and_rejects_corrupt_models() {
+    let dir = tempfile::tempdir().unwrap();
+    let (onnx, slm) = tiny_model(dir.path());
+    let img = dir.path().join("frame.png");
+    write_image(&img, 64, 40); // factor 2 onto 24x32
+    let out = dir.path().join("out");
+    let o = semloc(&["segment", s(&img), "--model", s(&slm), "--out", s(&out), "--onnx", s(&onnx)]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("label agreement"), "{}", text(&o));
+    let labels = image::open(out.join("frame_labels.png")).unwrap().into_luma8();
+    assert_eq!(labels.dimensions(), (64, 40));
+    assert!(labels.iter().all(|&v| v < 3), "3-class net");
+    assert!(out.join("frame_overlay.png").is_file() && out.join("frame_labels_f32.png").is_file());
+
+    // unreadable image
+    let bad = dir.path().join("bad.png");
+    std::fs::write(&bad, b"not a png").unwrap();
+    let o = semloc(&["segment", s(&bad), "--model", s(&slm), "--out", s(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains(&format!("{}: cannot decode image", bad.display())), "{}", text(&o));
+
+    // one flipped bit in the blob
+    let mut bytes = std::fs::read(&slm).unwrap();
+    let k = bytes.len() / 2;
+    bytes[k] ^= 0x10;
+    let corrupt = dir.path().join("corrupt.slm");
+    std::fs::write(&corrupt, bytes).unwrap();
+    let o = semloc(&["segment", s(&img), "--model", s(&corrupt), "--out", s(&out)]);
+    assert_eq!(o.status.code(), Some(1));
+    let t = text(&o);
+    assert!(t.contains(&format!("{}: model blob corrupt: CRC-32", corrupt.display())), "{t}");
+}
+
+#[test]
+fn verify_seg_scores_a_camvid_layout_and_checks_kernels() {
+    let dir = tempfile::tempdir().unwrap();
+    let (onnx, slm) = tiny_model(dir.path());
+    let root = dir.path().join("camvid");
+    std::fs::create_dir_all(root.join("val")).unwrap();
+    std::fs::create_dir_all(root.join("valannot")).unwrap();
+    for (i, name) in ["a", "b"].iter().enumerate() {
+        write_image(&root.join("val").join(format!("{name}.png")), 30 + i as u32, 20);
+        let lab =
+            image::GrayImage::from_fn(30 + i as u32, 20, |x, _| image::Luma([(x % 4) as u8 * 4]));
+        lab.save(root.join("valannot").join(format!("{name}.png"))).unwrap();
+    }
+    let json = dir.path().join("v.json");
+    let o = semloc(&[
+        "verify-seg",
+        "--model",
+        s(&slm),
+        "--onnx",
+        s(&onnx),
+        "--camvid",
+        s(&root),
+        "--json",
+        s(&json),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("mIoU: int8") && t.contains("bit-identical"), "{t}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["images"], 2);
+    assert_eq!(v["reference_checked"], 2);
+    assert_eq!(v["letterbox_factor"], 1);
+    let agree = v["agreement_pct"].as_f64().unwrap();
+    assert!((0.0..=100.0).contains(&agree));
+    assert!(v["int8"]["miou"].is_number() && v["f32"]["miou"].is_number());
+
+    // a missing label file is named
+    std::fs::remove_file(root.join("valannot").join("b.png")).unwrap();
+    let o = semloc(&["verify-seg", "--model", s(&slm), "--onnx", s(&onnx), "--camvid", s(&root)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("valannot/b.png: missing file"), "{}", text(&o));
+}
