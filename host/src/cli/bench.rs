@@ -1,5 +1,6 @@
 //! `semloc bench`: whole-pipeline and per-stage timings, as ratios to references measured in
-//! the same invocation (OpenCV's ORB on the same frames; the pipeline on one thread).
+//! the same invocation (OpenCV's ORB on the same frames; the pipeline on one thread; with
+//! `--model`/`--onnx`, the int8 segmentation network against tract running its float ONNX).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -37,6 +38,38 @@ pub struct BenchArgs {
     /// Also write the figures as JSON here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Segmentation section: the int8 model (`semloc convert`), timed against --onnx.
+    #[arg(long, value_name = "X.slm", requires = "onnx")]
+    pub model: Option<PathBuf>,
+    /// The float ONNX the model was converted from, run by tract (f32, 1 thread).
+    #[arg(long, value_name = "X.onnx", requires = "model")]
+    pub onnx: Option<PathBuf>,
+    /// Only the segmentation section (skips ORB, OpenCV and the pipeline).
+    #[arg(long, requires = "model")]
+    pub seg_only: bool,
+}
+
+/// The segmentation section: network time per frame on the same input maps (letterboxed left
+/// images), int8 core (fast kernels) and tract f32, both on one thread, interleaved per frame.
+#[derive(Debug, serde::Serialize)]
+struct SegBench {
+    input_hw: (usize, usize),
+    letterbox_factor: usize,
+    runs: usize,
+    int8_core_1thread: Percentiles,
+    tract_f32_1thread: Percentiles,
+    ratio_int8_over_f32_median: f64,
+    /// Where the int8 time goes, by op kind.
+    int8_by_op_kind: std::collections::BTreeMap<&'static str, OpKindTime>,
+}
+
+/// int8 time of one op kind per frame.
+#[derive(Debug, serde::Serialize)]
+struct OpKindTime {
+    ops: usize,
+    median_ms: f64,
+    macs: u64,
+    gmac_per_s: f64,
 }
 
 #[derive(Debug, serde::Serialize)]
@@ -49,6 +82,8 @@ struct BenchReport {
     pipeline_1thread: std::collections::BTreeMap<&'static str, Percentiles>,
     pipeline_2threads: std::collections::BTreeMap<&'static str, Percentiles>,
     wall_ratio_2_over_1_threads: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    segmentation: Option<SegBench>,
 }
 
 /// Runs `semloc bench`.
@@ -66,9 +101,23 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     pb.finish_and_clear();
     let (w, h) = seq.image_size;
+    let repeat = args.repeat.max(1);
+    let seg = match (&args.model, &args.onnx) {
+        (Some(m), Some(o)) => Some(seg_times(m, o, &frames, repeat)?),
+        _ => None,
+    };
+    if let (true, Some(s)) = (args.seg_only, &seg) {
+        println!("{n} frames, {w}x{h}");
+        print_seg(s);
+        if let Some(path) = &args.json {
+            let v = serde_json::json!({ "frames": n, "image_size": (w, h), "segmentation": s });
+            std::fs::write(path, serde_json::to_string_pretty(&v)?)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        return Ok(());
+    }
 
     // ORB alone, one thread, left images.
-    let repeat = args.repeat.max(1);
     let lefts: Vec<GrayImage> = frames.iter().map(|f| f.0.clone()).collect();
     let orb_ms = std::thread::Builder::new()
         .stack_size(BIG_STACK_BYTES)
@@ -122,6 +171,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         pipeline_1thread: t1,
         pipeline_2threads: t2,
         wall_ratio_2_over_1_threads: wall_ratio,
+        segmentation: seg,
     };
     print_report(&report);
     if let Some(path) = &args.json {
@@ -129,6 +179,115 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+/// Times the int8 network and tract's f32 run of its ONNX on the left frames (`repeat` passes),
+/// alternating per frame so load changes on a shared machine hit both alike. Letterboxing is
+/// done once per frame, outside the timed region; argmax is inside both.
+fn seg_times(
+    model: &std::path::Path,
+    onnx: &std::path::Path,
+    frames: &[(GrayImage, GrayImage)],
+    repeat: usize,
+) -> Result<SegBench> {
+    use semloc::nn::convert::kind_name;
+    use semloc::nn::segment::Segmenter;
+    use semloc_core::nn::graph::Kernels;
+    use std::collections::BTreeMap;
+    let mut seg = Segmenter::new(semloc::nn::SlmBlob::load(model)?)?;
+    let tract = semloc::nn::tract_ref::TractRef::load(onnx)?;
+    // op kinds and MACs per kind, for the per-kind split of the int8 time
+    let (kinds, mut by_kind) = {
+        let m = seg.model()?;
+        let mut by_kind: BTreeMap<&'static str, (usize, u64, Vec<f64>)> = BTreeMap::new();
+        let mut kinds = Vec::new();
+        for k in 0..m.n_ops() {
+            let op = m.op(k);
+            let name = kind_name(op.kind());
+            let (ins, _) = op.inputs();
+            let shape = |t: u32| m.tensor(t as usize).map(|t| t.shape);
+            let macs = match (shape(ins[0]), shape(op.output())) {
+                (Some(i), Some(o)) => op.macs(i, o),
+                _ => 0,
+            };
+            let e = by_kind.entry(name).or_default();
+            e.0 += 1;
+            e.1 += macs;
+            kinds.push(name);
+        }
+        (kinds, by_kind)
+    };
+    let mut factor = 0;
+    let (mut t8, mut t32) = (Vec::new(), Vec::new());
+    let pb = super::progress((frames.len() * repeat) as u64, "seg bench");
+    for _ in 0..repeat {
+        for (left, _) in frames {
+            let (lb, _) = seg.prepare(left)?;
+            factor = lb.factor;
+            let mut frame: BTreeMap<&'static str, f64> = BTreeMap::new();
+            let t = Instant::now();
+            let mut last = t;
+            seg.run_prepared_observed(Kernels::Fast, &mut |k| {
+                let now = Instant::now();
+                *frame.entry(kinds[k]).or_default() += (now - last).as_secs_f64() * 1e3;
+                last = now;
+            })?;
+            t8.push(t.elapsed().as_secs_f64() * 1e3);
+            for (k, ms) in frame {
+                if let Some(e) = by_kind.get_mut(k) {
+                    e.2.push(ms);
+                }
+            }
+            let t = Instant::now();
+            seg.reference(&tract)?;
+            t32.push(t.elapsed().as_secs_f64() * 1e3);
+            pb.inc(1);
+        }
+    }
+    pb.finish_and_clear();
+    let (a, b) = (percentiles(&t8), percentiles(&t32));
+    Ok(SegBench {
+        input_hw: seg.input_size(),
+        letterbox_factor: factor,
+        runs: t8.len(),
+        int8_core_1thread: a,
+        tract_f32_1thread: b,
+        ratio_int8_over_f32_median: a.median_ms / b.median_ms,
+        int8_by_op_kind: by_kind
+            .into_iter()
+            .map(|(k, (ops, macs, ms))| {
+                let median_ms = percentiles(&ms).median_ms;
+                let gmac_per_s = macs as f64 / (median_ms * 1e-3) * 1e-9;
+                (k, OpKindTime { ops, median_ms, macs, gmac_per_s })
+            })
+            .collect(),
+    })
+}
+
+fn print_seg(s: &SegBench) {
+    println!(
+        "segmentation {}x{} (letterbox factor {}), {} runs, 1 thread: int8 core median {:.1} ms, \
+         p99 {:.1} ms; tract f32 median {:.1} ms, p99 {:.1} ms -> int8/f32 = {:.2}",
+        s.input_hw.0,
+        s.input_hw.1,
+        s.letterbox_factor,
+        s.runs,
+        s.int8_core_1thread.median_ms,
+        s.int8_core_1thread.p99_ms,
+        s.tract_f32_1thread.median_ms,
+        s.tract_f32_1thread.p99_ms,
+        s.ratio_int8_over_f32_median
+    );
+    println!("{:<14}{:>6}{:>12}{:>10}{:>12}", "int8 op kind", "ops", "median ms", "GMAC", "GMAC/s");
+    for (k, t) in &s.int8_by_op_kind {
+        println!(
+            "{k:<14}{:>6}{:>12.2}{:>10.3}{:>12.2}",
+            t.ops,
+            t.median_ms,
+            t.macs as f64 * 1e-9,
+            t.gmac_per_s
+        );
+    }
 }
 
 fn pipeline_times(
@@ -228,4 +387,7 @@ fn print_report(r: &BenchReport) {
         );
     }
     println!("frame wall time, 2 threads / 1 thread = {:.2}", r.wall_ratio_2_over_1_threads);
+    if let Some(s) = &r.segmentation {
+        print_seg(s);
+    }
 }
