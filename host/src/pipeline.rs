@@ -14,12 +14,101 @@ use image::GrayImage;
 use semloc_core::frame::Frame;
 use semloc_core::image::ImageView;
 use semloc_core::image::ImageViewMut;
+use semloc_core::nn::graph::Kernels;
 use semloc_core::orb::{KittiOrbExtractor, NoWeights, OrbConfig, OrbError};
 use semloc_core::seg::{weight_image, WeightScheme};
 use semloc_core::stereo::{KittiStereoMatcher, StereoError, StereoParams, StereoStats};
 use semloc_core::tracker::{FrameReport, Tracker, TrackerError, TrackerParams};
 
+use std::borrow::Cow;
+
 use crate::dataset::{DatasetError, Sequence, StereoCalib};
+use crate::nn::segment::Segmenter;
+use crate::nn::NnFileError;
+
+/// Where a pipeline gets a frame's images (and, without a network, its labels).
+pub trait FrameSource: Sync {
+    /// Number of frames.
+    fn len(&self) -> usize;
+    /// True when there are no frames.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Frame `i`'s left luma image.
+    fn left(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError>;
+    /// Frame `i`'s right luma image.
+    fn right(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError>;
+    /// Frame `i`'s left labels from the dataset (used when no network is set).
+    fn labels(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError>;
+    /// Frame `i`'s timestamp in seconds.
+    fn timestamp_s(&self, i: usize) -> f64;
+}
+
+impl FrameSource for Sequence {
+    fn len(&self) -> usize {
+        Sequence::len(self)
+    }
+    fn left(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError> {
+        Ok(Cow::Owned(self.load_luma_side(i, false)?))
+    }
+    fn right(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError> {
+        Ok(Cow::Owned(self.load_luma_side(i, true)?))
+    }
+    fn labels(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError> {
+        Ok(Cow::Owned(self.load_labels(i)?))
+    }
+    fn timestamp_s(&self, i: usize) -> f64 {
+        self.times_s.get(i).copied().unwrap_or(i as f64 * 0.1)
+    }
+}
+
+/// Frames already decoded in memory (benchmarks, synthetic runs): frame `first_index + k` is
+/// `left[k]`, `right[k]`.
+#[derive(Clone, Copy, Debug)]
+pub struct MemoryFrames<'a> {
+    /// Left luma images.
+    pub left: &'a [GrayImage],
+    /// Right luma images.
+    pub right: &'a [GrayImage],
+    /// Left labels, if the frames come with them.
+    pub labels: Option<&'a [GrayImage]>,
+    /// Index of the first frame.
+    pub first_index: usize,
+    /// Timestamps (missing ones: 10 Hz).
+    pub times_s: &'a [f64],
+}
+
+impl MemoryFrames<'_> {
+    fn get<'b>(&self, v: &'b [GrayImage], i: usize) -> Result<&'b GrayImage, PipelineError> {
+        i.checked_sub(self.first_index)
+            .and_then(|k| v.get(k))
+            .ok_or_else(|| PipelineError::Worker(format!("frame {i} is not in memory")))
+    }
+}
+
+impl FrameSource for MemoryFrames<'_> {
+    fn len(&self) -> usize {
+        self.first_index + self.left.len().min(self.right.len())
+    }
+    fn left(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError> {
+        self.get(self.left, i).map(Cow::Borrowed)
+    }
+    fn right(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError> {
+        self.get(self.right, i).map(Cow::Borrowed)
+    }
+    fn labels(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError> {
+        match self.labels {
+            Some(l) => self.get(l, i).map(Cow::Borrowed),
+            None => Err(PipelineError::Worker(format!("frame {i} has no labels in memory"))),
+        }
+    }
+    fn timestamp_s(&self, i: usize) -> f64 {
+        i.checked_sub(self.first_index)
+            .and_then(|k| self.times_s.get(k))
+            .copied()
+            .unwrap_or(i as f64 * 0.1)
+    }
+}
 
 /// Why the pipeline could not be built or could not process a frame.
 #[derive(Debug, thiserror::Error)]
@@ -49,6 +138,14 @@ pub enum PipelineError {
         /// The core error.
         err: StereoError,
     },
+    /// The segmentation network failed on a frame.
+    #[error("segmentation of frame {frame}: {err}")]
+    Segment {
+        /// Frame index.
+        frame: usize,
+        /// The model file's error.
+        err: NnFileError,
+    },
     /// Loading a frame's images failed.
     #[error(transparent)]
     Dataset(#[from] DatasetError),
@@ -72,6 +169,9 @@ pub struct StageTimes {
     pub stereo_ms: f64,
     /// Tracking (search, pose optimisation, keyframe, BA).
     pub track_ms: f64,
+    /// Network segmentation of this frame's left image (run on the second thread while the
+    /// previous frame was tracked, when two threads are used); 0 without a network.
+    pub seg_ms: f64,
     /// Wall time of the whole frame, loading included.
     pub total_ms: f64,
     /// Wall time without image decoding: what the ECU pipeline would spend.
@@ -106,8 +206,19 @@ pub struct Pipeline {
     semantics: Option<WeightScheme>,
     /// Weight image buffer (host side; reused every frame).
     weights: Vec<u8>,
-    /// The current frame's left labels, when semantics are on.
-    labels: Option<GrayImage>,
+    /// The network that labels left frames when semantics are on (else the dataset's labels).
+    segmenter: Option<Segmenter>,
+    /// The next frame's left image and labels, made while this frame was tracked.
+    prefetched: Option<Prefetch>,
+}
+
+/// A frame segmented ahead of its turn.
+struct Prefetch {
+    index: usize,
+    left: GrayImage,
+    labels: GrayImage,
+    seg_ms: f64,
+    load_ms: f64,
 }
 
 /// Stack for threads that construct or run core's large fixed-size state.
@@ -159,7 +270,8 @@ impl Pipeline {
             threads: threads.clamp(1, 2),
             semantics: None,
             weights: Vec::new(),
-            labels: None,
+            segmenter: None,
+            prefetched: None,
         })
     }
 
@@ -171,10 +283,23 @@ impl Pipeline {
             + core::mem::size_of::<Tracker>()
     }
 
-    /// Weights left-image features by semantic class (labels from the sequence's `semantic/`
-    /// folder, see [`Sequence::load_labels`]); `None` turns it off.
+    /// Weights left-image features by semantic class; `None` turns it off. Labels come from
+    /// the network set with [`Pipeline::set_segmenter`], else from the sequence's `semantic/`
+    /// folder (see [`Sequence::load_labels`]).
     pub fn set_semantics(&mut self, scheme: Option<WeightScheme>) {
         self.semantics = scheme;
+    }
+
+    /// Labels left frames with the int8 network (pipelined on the second thread). The
+    /// network's input must take this pipeline's frames (see [`Segmenter::letterbox`]).
+    pub fn set_segmenter(&mut self, segmenter: Segmenter) {
+        self.segmenter = Some(segmenter);
+        self.prefetched = None;
+    }
+
+    /// The network segmenter, if one is set.
+    pub fn segmenter(&self) -> Option<&Segmenter> {
+        self.segmenter.as_ref()
     }
 
     /// The tracker (for counters and the window).
@@ -188,69 +313,12 @@ impl Pipeline {
         seq: &Sequence,
         i: usize,
     ) -> Result<FrameOutput, PipelineError> {
-        let t0 = Instant::now();
-        let ts = seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1);
-        let (left_ex, right_ex) = (&mut self.left, &mut self.right);
-        let (scheme, weights, kept) = (self.semantics, &mut self.weights, &mut self.labels);
-        let mut left_side = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
-            let t = Instant::now();
-            let img = seq.load_luma_side(i, false)?;
-            *kept = scheme.map(|_| seq.load_labels(i)).transpose()?;
-            let load = ms(t);
-            let t = Instant::now();
-            match (scheme, kept.as_ref()) {
-                (Some(scheme), Some(labels)) => {
-                    extract_weighted(ex, &img, labels, scheme, weights, i)?
-                }
-                _ => extract(ex, &img, i, "left")?,
-            }
-            Ok((load, ms(t)))
-        };
-        let right_side = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
-            let t = Instant::now();
-            let img = seq.load_luma_side(i, true)?;
-            let load = ms(t);
-            let t = Instant::now();
-            extract(ex, &img, i, "right")?;
-            Ok((load, ms(t)))
-        };
-        let ((_, orb_left_ms), (_, orb_right_ms), load_ms) = if self.threads >= 2 {
-            let (l, r) = std::thread::scope(|s| {
-                let h = s.spawn(|| right_side(right_ex));
-                let l = left_side(left_ex);
-                (l, h.join())
-            });
-            let l = l?;
-            let r =
-                r.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))??;
-            (l, r, l.0.max(r.0))
-        } else {
-            let l = left_side(left_ex)?;
-            let r = right_side(right_ex)?;
-            (l, r, l.0 + r.0)
-        };
-        let extract_wall_ms = ms(t0);
-        let (stereo, stereo_ms, report, track_ms) = self.match_and_track(i, ts)?;
-        let total_ms = ms(t0);
-        let times = StageTimes {
-            load_ms,
-            orb_left_ms,
-            orb_right_ms,
-            extract_wall_ms,
-            stereo_ms,
-            track_ms,
-            total_ms,
-            compute_ms: total_ms - load_ms,
-        };
-        Ok(FrameOutput { report, stereo, times, culled: self.culled() })
+        self.process_frame(seq, i)
     }
 
-    /// Candidates the left extractor dropped for a zero weight on the last frame.
-    fn culled(&self) -> u32 {
-        self.left.features().stats().levels().iter().map(|l| l.weight_dropped).sum()
-    }
-
-    /// Processes one stereo pair given as luma images (for callers with images in memory).
+    /// Processes one stereo pair given as luma images (for callers with images in memory). With
+    /// semantics on, its labels come from the network (no prefetch: a single pair has no next
+    /// frame).
     pub fn process_images(
         &mut self,
         left: &GrayImage,
@@ -258,74 +326,242 @@ impl Pipeline {
         index: usize,
         timestamp_s: f64,
     ) -> Result<FrameOutput, PipelineError> {
-        let t0 = Instant::now();
-        self.labels = None;
-        let (orb_left_ms, orb_right_ms) = if self.threads >= 2 {
-            let (left_ex, right_ex) = (&mut self.left, &mut self.right);
-            let (l, r) = std::thread::scope(|s| {
-                let h = s.spawn(|| timed(|| extract(right_ex, right, index, "right")));
-                let l = timed(|| extract(left_ex, left, index, "left"));
-                (l, h.join())
-            });
-            let (lr, lt) = l;
-            let (rr, rt) =
-                r.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))?;
-            lr?;
-            rr?;
-            (lt, rt)
-        } else {
-            let (lr, lt) = timed(|| extract(&mut self.left, left, index, "left"));
-            lr?;
-            let (rr, rt) = timed(|| extract(&mut self.right, right, index, "right"));
-            rr?;
-            (lt, rt)
+        let pair = MemoryFrames {
+            left: core::slice::from_ref(left),
+            right: core::slice::from_ref(right),
+            labels: None,
+            first_index: index,
+            times_s: &[timestamp_s],
         };
-        let extract_wall_ms = ms(t0);
-        let (stereo, stereo_ms, report, track_ms) = self.match_and_track(index, timestamp_s)?;
-        let total_ms = ms(t0);
-        let times = StageTimes {
-            load_ms: 0.0,
-            orb_left_ms,
-            orb_right_ms,
-            extract_wall_ms,
-            stereo_ms,
-            track_ms,
-            total_ms,
-            compute_ms: total_ms,
-        };
-        Ok(FrameOutput { report, stereo, times, culled: 0 })
+        self.process_frame(&pair, index)
     }
 
-    fn match_and_track(
+    /// Processes frame `i` of `src`. With two threads the second one extracts the right
+    /// image's ORB and then, while this thread matches and tracks frame `i`, decodes and
+    /// segments frame `i + 1` (when a network labels the frames), so a frame costs
+    /// max(segmentation, tracking) rather than their sum. One thread does the same steps in
+    /// sequence; the results are identical.
+    pub fn process_frame(
         &mut self,
-        index: usize,
-        timestamp_s: f64,
-    ) -> Result<(StereoStats, f64, FrameReport, f64), PipelineError> {
-        let t = Instant::now();
-        let stats = self
-            .stereo
-            .match_frame(
-                self.left.features(),
-                self.left.pyramid(),
-                self.right.features(),
-                self.right.pyramid(),
-                &self.params,
-                timestamp_s,
-                &mut self.frame,
-            )
-            .map_err(|err| PipelineError::Stereo { frame: index, err })?;
-        if let Some(labels) = &self.labels {
-            // Class and semantic descriptor per feature, for the EM association.
-            let (w, h) = (labels.width() as usize, labels.height() as usize);
-            let lv = ImageView::from_slice(labels.as_raw(), w, h)
-                .map_err(|e| PipelineError::Orb { frame: index, side: "left", err: e.into() })?;
-            semloc_core::assoc::annotate(&mut self.frame, &lv);
-        }
-        let stereo_ms = ms(t);
-        let t = Instant::now();
-        let report = self.tracker.process(&self.frame);
-        Ok((stats, stereo_ms, report, ms(t)))
+        src: &(impl FrameSource + ?Sized),
+        i: usize,
+    ) -> Result<FrameOutput, PipelineError> {
+        let t0 = Instant::now();
+        let ts = src.timestamp_s(i);
+        let scheme = self.semantics;
+        let use_net = scheme.is_some() && self.segmenter.is_some();
+        // Frame i's left image and labels: prefetched by the previous frame, or made now.
+        let prefetched = self.prefetched.take().filter(|p| p.index == i);
+        let mut seg_ms = 0.0;
+        let mut seg_load_ms = 0.0;
+        let (left_img, labels): (Option<GrayImage>, Option<GrayImage>) = match prefetched {
+            Some(p) => {
+                seg_ms = p.seg_ms;
+                (Some(p.left), Some(p.labels))
+            }
+            None if use_net => {
+                let t = Instant::now();
+                let img = src.left(i)?.into_owned();
+                seg_load_ms = ms(t);
+                let t = Instant::now();
+                let seg = self
+                    .segmenter
+                    .as_mut()
+                    .ok_or_else(|| PipelineError::Worker("segmenter vanished".into()))?;
+                let labels = segment(seg, &img, i)?;
+                seg_ms = ms(t);
+                (Some(img), Some(labels))
+            }
+            None => (None, None),
+        };
+        let next = (use_net && i + 1 < src.len()).then_some(i + 1);
+        let threads = self.threads;
+        let Pipeline { left, right, stereo, frame, tracker, params, segmenter, weights, .. } = self;
+        let (left_ex, right_ex, seg) = (&mut **left, &mut **right, segmenter.as_mut());
+        let (stereo, frame, tracker, params) =
+            (&mut **stereo, &mut **frame, &mut **tracker, &*params);
+
+        // The right image: load and extract (the second thread's first job).
+        let right_work = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
+            let t = Instant::now();
+            let img = src.right(i)?;
+            let load = ms(t);
+            let t = Instant::now();
+            extract(ex, &img, i, "right")?;
+            Ok((load, ms(t)))
+        };
+        // The next frame's labels (the second thread's second job).
+        let seg_work = |seg: Option<&mut Segmenter>| -> Result<Option<Prefetch>, PipelineError> {
+            let (Some(j), Some(seg)) = (next, seg) else { return Ok(None) };
+            let t = Instant::now();
+            let img = src.left(j)?.into_owned();
+            let load_ms = ms(t);
+            let t = Instant::now();
+            let labels = segment(seg, &img, j)?;
+            Ok(Some(Prefetch { index: j, left: img, labels, seg_ms: ms(t), load_ms }))
+        };
+        // This thread: left image, weighted ORB; then (with the right features) stereo + track.
+        let left_work =
+            |ex: &mut KittiOrbExtractor,
+             weights: &mut Vec<u8>|
+             -> Result<(GrayImage, Option<GrayImage>, f64, f64), PipelineError> {
+                let t = Instant::now();
+                let img = match left_img {
+                    Some(img) => img,
+                    None => src.left(i)?.into_owned(),
+                };
+                let labels = match (scheme, labels) {
+                    (Some(_), Some(l)) => Some(l),
+                    (Some(_), None) => Some(src.labels(i)?.into_owned()),
+                    (None, _) => None,
+                };
+                let load = ms(t);
+                let t = Instant::now();
+                match (scheme, labels.as_ref()) {
+                    (Some(scheme), Some(l)) => extract_weighted(ex, &img, l, scheme, weights, i)?,
+                    _ => extract(ex, &img, i, "left")?,
+                }
+                Ok((img, labels, load, ms(t)))
+            };
+
+        let (l, r, pre, track) = if threads >= 2 {
+            let (tx, rx) = std::sync::mpsc::sync_channel::<&KittiOrbExtractor>(1);
+            let scoped = std::thread::scope(|s| {
+                let h = s.spawn(move || {
+                    let r = right_work(right_ex);
+                    let r = match r {
+                        Ok(r) => r,
+                        Err(e) => return (Err(e), Ok(None)),
+                    };
+                    let shared: &KittiOrbExtractor = right_ex;
+                    // the receiver only disappears when this frame already failed
+                    let _ = tx.send(shared);
+                    (Ok(r), seg_work(seg))
+                });
+                let l = left_work(left_ex, weights);
+                let track = match (&l, rx.recv()) {
+                    (Ok((_, labels, _, _)), Ok(right_ex)) => Some(match_and_track(
+                        left_ex,
+                        right_ex,
+                        stereo,
+                        frame,
+                        tracker,
+                        params,
+                        labels.as_ref(),
+                        i,
+                        ts,
+                    )),
+                    _ => None,
+                };
+                let joined = h.join();
+                (l, joined, track)
+            });
+            let (l, joined, track) = scoped;
+            let (r, pre) =
+                joined.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))?;
+            (l, r, pre, track)
+        } else {
+            let r = right_work(right_ex);
+            let l = left_work(left_ex, weights);
+            let track = match (&l, &r) {
+                (Ok((_, labels, _, _)), Ok(_)) => Some(match_and_track(
+                    left_ex,
+                    right_ex,
+                    stereo,
+                    frame,
+                    tracker,
+                    params,
+                    labels.as_ref(),
+                    i,
+                    ts,
+                )),
+                _ => None,
+            };
+            let pre =
+                if track.as_ref().is_some_and(|t| t.is_ok()) { seg_work(seg) } else { Ok(None) };
+            (l, r, pre, track)
+        };
+        let (_img, _labels, left_load_ms, orb_left_ms) = l?;
+        let (right_load_ms, orb_right_ms) = r?;
+        let (stereo_stats, stereo_ms, report, track_ms, extract_done_ms) = match track {
+            Some(t) => t?,
+            None => return Err(PipelineError::Worker("frame aborted".into())),
+        };
+        let pre = pre?;
+        let next_load_ms = pre.as_ref().map_or(0.0, |p| p.load_ms);
+        self.prefetched = pre;
+        let total_ms = ms(t0);
+        let load_ms = seg_load_ms + left_load_ms.max(right_load_ms) + next_load_ms;
+        let times = StageTimes {
+            load_ms,
+            orb_left_ms,
+            orb_right_ms,
+            extract_wall_ms: extract_done_ms
+                .map_or(0.0, |t| t.duration_since(t0).as_secs_f64() * 1e3),
+            stereo_ms,
+            track_ms,
+            seg_ms,
+            total_ms,
+            compute_ms: (total_ms - load_ms).max(0.0),
+        };
+        Ok(FrameOutput { report, stereo: stereo_stats, times, culled: self.culled() })
     }
+
+    /// Candidates the left extractor dropped for a zero weight on the last frame.
+    fn culled(&self) -> u32 {
+        self.left.features().stats().levels().iter().map(|l| l.weight_dropped).sum()
+    }
+}
+
+/// Stereo matching, per-feature semantics for the EM association, and tracking of one frame.
+/// Returns the stereo counters, stereo ms, the tracker's report, track ms, and when the
+/// extraction had finished (this is called once both extractions are done).
+#[allow(clippy::too_many_arguments)]
+fn match_and_track(
+    left: &KittiOrbExtractor,
+    right: &KittiOrbExtractor,
+    stereo: &mut KittiStereoMatcher,
+    frame: &mut Frame,
+    tracker: &mut Tracker,
+    params: &StereoParams,
+    labels: Option<&GrayImage>,
+    index: usize,
+    timestamp_s: f64,
+) -> Result<(StereoStats, f64, FrameReport, f64, Option<Instant>), PipelineError> {
+    let t = Instant::now();
+    let stats = stereo
+        .match_frame(
+            left.features(),
+            left.pyramid(),
+            right.features(),
+            right.pyramid(),
+            params,
+            timestamp_s,
+            frame,
+        )
+        .map_err(|err| PipelineError::Stereo { frame: index, err })?;
+    if let Some(labels) = labels {
+        // Class and semantic descriptor per feature, for the EM association.
+        let (w, h) = (labels.width() as usize, labels.height() as usize);
+        let lv = ImageView::from_slice(labels.as_raw(), w, h).map_err(|e| PipelineError::Orb {
+            frame: index,
+            side: "left",
+            err: e.into(),
+        })?;
+        semloc_core::assoc::annotate(frame, &lv);
+    }
+    let stereo_ms = ms(t);
+    let t2 = Instant::now();
+    let report = tracker.process(frame);
+    Ok((stats, stereo_ms, report, ms(t2), Some(t)))
+}
+
+/// The network's labels of one left frame, as an image.
+fn segment(seg: &mut Segmenter, img: &GrayImage, frame: usize) -> Result<GrayImage, PipelineError> {
+    let labels =
+        seg.segment(img, Kernels::Fast).map_err(|err| PipelineError::Segment { frame, err })?;
+    GrayImage::from_raw(img.width(), img.height(), labels.frame)
+        .ok_or_else(|| PipelineError::Worker(format!("frame {frame}: label image size")))
 }
 
 fn extract(
@@ -364,12 +600,6 @@ fn extract_weighted(
     let weights = ImageView::from_slice(buf, w, h).map_err(|e| orb(e.into()))?;
     ex.extract_weighted(&view, &weights).map_err(orb)?;
     Ok(())
-}
-
-fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
-    let t = Instant::now();
-    let r = f();
-    (r, ms(t))
 }
 
 fn ms(t: Instant) -> f64 {

@@ -176,6 +176,8 @@ pub enum ModelError {
     /// The input or output tensor is not what the executor can use (input: 1 channel with
     /// scale 1/255 and zero point −128; output: produced by an op).
     BadIo,
+    /// [`Model::attach`] was given other memory than the layout was parsed from.
+    NotParsed,
     /// A kernel refused an op's operands (cannot happen for a blob that parsed).
     Kernel {
         /// Op index.
@@ -211,6 +213,7 @@ impl fmt::Display for ModelError {
                 write!(f, "activation arena too small: need {need} bytes, got {got}")
             }
             Self::BadIo => write!(f, "model blob input/output tensors are not usable"),
+            Self::NotParsed => write!(f, "model bytes are not the ones that were parsed"),
             Self::Kernel { op, error } => write!(f, "model op {op}: {error}"),
         }
     }
@@ -742,6 +745,24 @@ pub struct Model<'a> {
     data: &'a [u8],
 }
 
+/// A parsed model's layout without the borrow of its bytes: an owner of a blob keeps it and
+/// calls [`Model::attach`] per use instead of parsing (CRC and validation, ~2–3 ms for the
+/// 1.4 MB network) again. It remembers which memory was parsed (address and length); the owner
+/// must not modify that memory afterwards (the host's `SlmBlob` never hands out `&mut`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ModelLayout {
+    addr: usize,
+    len: usize,
+    n_tensors: usize,
+    n_ops: usize,
+    input: u32,
+    output: u32,
+    arena_len: usize,
+    tensors_off: usize,
+    ops_off: usize,
+    data_off: usize,
+}
+
 impl<'a> Model<'a> {
     /// Parses and validates a blob (see the module docs for what is checked).
     pub fn parse(blob: &'a [u8]) -> Result<Self, ModelError> {
@@ -803,6 +824,42 @@ impl<'a> Model<'a> {
         };
         m.validate()?;
         Ok(m)
+    }
+
+    /// This model's layout, for [`Model::attach`].
+    pub fn layout(&self) -> ModelLayout {
+        ModelLayout {
+            addr: self.blob.as_ptr() as usize,
+            len: self.blob.len(),
+            n_tensors: self.n_tensors,
+            n_ops: self.n_ops,
+            input: self.input,
+            output: self.output,
+            arena_len: self.arena_len,
+            tensors_off: self.tensors_off,
+            ops_off: self.ops_off,
+            data_off: self.blob.len() - self.data.len(),
+        }
+    }
+
+    /// The model [`Model::parse`] returned for exactly these bytes (same address and length:
+    /// else [`ModelError::NotParsed`]), without parsing again.
+    pub fn attach(layout: &ModelLayout, blob: &'a [u8]) -> Result<Self, ModelError> {
+        let blob = blob.get(..layout.len).ok_or(ModelError::NotParsed)?;
+        if blob.as_ptr() as usize != layout.addr || layout.data_off > blob.len() {
+            return Err(ModelError::NotParsed);
+        }
+        Ok(Model {
+            blob,
+            n_tensors: layout.n_tensors,
+            n_ops: layout.n_ops,
+            input: layout.input,
+            output: layout.output,
+            arena_len: layout.arena_len,
+            tensors_off: layout.tensors_off,
+            ops_off: layout.ops_off,
+            data: &blob[layout.data_off..],
+        })
     }
 
     fn validate(&self) -> Result<(), ModelError> {

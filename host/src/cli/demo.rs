@@ -76,6 +76,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             assoc: super::run::AssocArg::Hard,
             align: AlignArg::Se3,
             max_frames: None,
+            model: None,
         };
         let dir = out.join(format!("run-{}", format!("{mode:?}").to_lowercase()));
         let o = execute(&seq, &rc, &dir)?;

@@ -37,10 +37,16 @@ pub struct RunArgs {
     pub ransac_iterations: u32,
     /// Semantic weighting of features: `off` (geometric backbone), `cull` (no features on
     /// dynamic classes), `full` (the paper's semantic ORB: cull dynamic, ×3 construction and
-    /// object classes). Labels come from the sequence's `semantic/` folder (ground-truth labels,
-    /// as `semloc synth` writes them); a sequence without one is an error.
+    /// object classes). Labels come from the int8 network given with --model, else from the
+    /// sequence's `semantic/` folder (ground-truth labels, as `semloc synth` writes them); with
+    /// neither it is an error.
     #[arg(long, value_enum, default_value_t = SemanticsArg::Off)]
     pub semantics: SemanticsArg,
+    /// The segmentation network (`.slm`, from `semloc convert`; e.g.
+    /// models/artefacts/fastscnn_r2_192x640.slm) that labels every left frame, pipelined on the
+    /// second thread. Used when --semantics is cull or full.
+    #[arg(long, value_name = "SLM")]
+    pub model: Option<PathBuf>,
     /// Data association: `hard` (nearest neighbour in descriptor space, ORB-SLAM2) or `em`
     /// (EM over gated candidates with geometry, ORB, class and semantic-descriptor terms and a
     /// null hypothesis; class and semantic terms need --semantics).
@@ -126,6 +132,7 @@ pub struct Summary {
     pub lost: u32,
     pub landmark_overflow: u32,
     pub core_memory_bytes: usize,
+    pub network_memory_bytes: usize,
     pub median_stereo_matches: f64,
     pub median_inliers: f64,
     pub semantics: String,
@@ -156,7 +163,7 @@ struct Run {
 
 /// How one tracking run is configured (the parts of `semloc run`'s arguments that `semloc
 /// demo` varies).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct RunConfig {
     /// Worker threads (1 or 2).
     pub threads: u8,
@@ -170,6 +177,8 @@ pub struct RunConfig {
     pub align: super::eval::AlignArg,
     /// Frames to process at most.
     pub max_frames: Option<usize>,
+    /// The segmentation network that labels frames (else the dataset's labels are used).
+    pub model: Option<PathBuf>,
 }
 
 /// What one run produced.
@@ -195,10 +204,15 @@ pub fn execute(seq: &Sequence, cfg: &RunConfig, out: &Path) -> Result<RunOutcome
         ..TrackerParams::default()
     };
     let mut pipe = Pipeline::new(&seq.calib, w, h, params, usize::from(cfg.threads))?;
-    if cfg.semantics != SemanticsArg::Off && !seq.has_labels() {
+    if let Some(p) = &cfg.model {
+        let seg = semloc::nn::segment::Segmenter::new(semloc::nn::SlmBlob::load(p)?)?;
+        seg.letterbox(w as usize, h as usize)
+            .with_context(|| format!("{} on {w}x{h} frames", p.display()))?;
+        pipe.set_segmenter(seg);
+    } else if cfg.semantics != SemanticsArg::Off && !seq.has_labels() {
         anyhow::bail!(
-            "--semantics {:?} needs labels: {} does not exist (synthetic sequences from \
-             `semloc synth` have them)",
+            "--semantics {:?} needs labels: give the network with --model FILE.slm, or a \
+             sequence with a {} folder (synthetic sequences from `semloc synth` have one)",
             cfg.semantics,
             seq.root.join("semantic").display()
         );
@@ -241,7 +255,8 @@ pub fn execute(seq: &Sequence, cfg: &RunConfig, out: &Path) -> Result<RunOutcome
         }
         _ => None,
     };
-    let summary = summarise(seq, &run, cfg, &stats, eval.as_ref());
+    let net_bytes = pipe.segmenter().map_or(0, |s| s.memory_bytes());
+    let summary = summarise(seq, &run, cfg, &stats, eval.as_ref(), net_bytes);
     let path = out.join("summary.json");
     std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("writing {}", path.display()))?;
@@ -258,6 +273,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         assoc: args.assoc,
         align: args.align,
         max_frames: args.max_frames,
+        model: args.model.clone(),
     };
     let outcome = execute(&seq, &cfg, &args.out)?;
     print_summary(&outcome.summary, outcome.eval.as_ref(), &args.out);
@@ -284,14 +300,14 @@ fn write_outputs(out: &Path, run: &Run) -> Result<()> {
     writeln!(
         f,
         "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,extract_wall_ms,stereo_ms,track_ms,\
-         compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,initialised,landmarks,\
+         seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,initialised,landmarks,\
          keyframes,ba_iterations,culled,em_changed"
     )?;
     for (o, t) in run.outputs.iter().zip(&run.stamps) {
         let (s, r) = (o.times, o.report);
         writeln!(
             f,
-            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
             r.frame_index,
             s.load_ms,
             s.orb_left_ms,
@@ -299,6 +315,7 @@ fn write_outputs(out: &Path, run: &Run) -> Result<()> {
             s.extract_wall_ms,
             s.stereo_ms,
             s.track_ms,
+            s.seg_ms,
             s.compute_ms,
             s.total_ms,
             o.stereo.matched,
@@ -332,6 +349,7 @@ fn summarise(
     cfg: &RunConfig,
     stats: &semloc_core::tracker::TrackerStats,
     eval: Option<&EvalReport>,
+    network_memory_bytes: usize,
 ) -> Summary {
     let col = |f: fn(&FrameOutput) -> f64| -> Vec<f64> { run.outputs.iter().map(f).collect() };
     let mut timing = std::collections::BTreeMap::new();
@@ -341,6 +359,9 @@ fn summarise(
     timing.insert("extract_wall", percentiles(&col(|o| o.times.extract_wall_ms)));
     timing.insert("stereo", percentiles(&col(|o| o.times.stereo_ms)));
     timing.insert("track", percentiles(&col(|o| o.times.track_ms)));
+    if cfg.model.is_some() && cfg.semantics != SemanticsArg::Off {
+        timing.insert("segment", percentiles(&col(|o| o.times.seg_ms)));
+    }
     timing.insert("compute", percentiles(&col(|o| o.times.compute_ms)));
     timing.insert("total", percentiles(&col(|o| o.times.total_ms)));
     Summary {
@@ -351,6 +372,7 @@ fn summarise(
         lost: stats.lost,
         landmark_overflow: stats.landmark_overflow,
         core_memory_bytes: Pipeline::memory_bytes(),
+        network_memory_bytes,
         median_stereo_matches: median(col(|o| f64::from(o.stereo.matched))),
         median_inliers: median(col(|o| f64::from(o.report.inliers))),
         semantics: format!("{:?}", cfg.semantics).to_lowercase(),
@@ -375,6 +397,12 @@ fn print_summary(s: &Summary, eval: Option<&EvalReport>, out: &Path) {
         s.keyframes, s.lost, s.median_stereo_matches, s.median_inliers
     );
     println!("core memory {:.1} MiB", s.core_memory_bytes as f64 / 1048576.0);
+    if s.network_memory_bytes > 0 {
+        println!(
+            "network memory {:.1} MiB (weights + arena + buffers)",
+            s.network_memory_bytes as f64 / 1048576.0
+        );
+    }
     println!("{:<14}{:>10}{:>10}{:>10}{:>10}", "stage [ms]", "median", "p90", "p99", "max");
     for (k, p) in &s.timing {
         println!(

@@ -21,16 +21,32 @@ pub mod tract_ref;
 
 use std::path::{Path, PathBuf};
 
-use semloc_core::nn::model::Model;
+use semloc_core::nn::model::{Model, ModelLayout};
 
 pub use error::NnFileError;
 
 /// An `.slm` blob in 4-byte-aligned memory (the core reads it in place), validated at load.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct SlmBlob {
     path: PathBuf,
     words: Vec<u32>,
     len: usize,
+    /// Set by the one full parse at load; [`SlmBlob::model`] re-attaches it.
+    layout: Option<ModelLayout>,
+}
+
+impl Clone for SlmBlob {
+    /// A copy in new memory, parsed once again so [`SlmBlob::model`] stays cheap for it.
+    fn clone(&self) -> Self {
+        let mut b = SlmBlob {
+            path: self.path.clone(),
+            words: self.words.clone(),
+            len: self.len,
+            layout: None,
+        };
+        b.layout = Model::parse(b.bytes()).ok().map(|m| m.layout());
+        b
+    }
 }
 
 impl SlmBlob {
@@ -44,8 +60,9 @@ impl SlmBlob {
     pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, NnFileError> {
         let mut words = vec![0u32; bytes.len().div_ceil(4)];
         bytemuck::cast_slice_mut::<u32, u8>(&mut words)[..bytes.len()].copy_from_slice(bytes);
-        let blob = SlmBlob { path: path.to_path_buf(), words, len: bytes.len() };
-        blob.model()?;
+        let mut blob = SlmBlob { path: path.to_path_buf(), words, len: bytes.len(), layout: None };
+        let layout = Model::parse(blob.bytes()).map_err(|e| NnFileError::model(path, e))?.layout();
+        blob.layout = Some(layout);
         Ok(blob)
     }
 
@@ -59,10 +76,15 @@ impl SlmBlob {
         &self.path
     }
 
-    /// The parsed model (a view into this blob; validated at load, so this does not fail for
-    /// a blob made by [`SlmBlob::load`] or [`SlmBlob::from_bytes`]).
+    /// The parsed model (a view into this blob). Validated once at load; this re-attaches
+    /// that parse (no CRC or validation per call), so it is cheap enough per frame.
     pub fn model(&self) -> Result<Model<'_>, NnFileError> {
-        Model::parse(self.bytes()).map_err(|e| NnFileError::model(&self.path, e))
+        let r = match &self.layout {
+            // a moved-from copy would not match; parse it then
+            Some(l) => Model::attach(l, self.bytes()).or_else(|_| Model::parse(self.bytes())),
+            None => Model::parse(self.bytes()),
+        };
+        r.map_err(|e| NnFileError::model(&self.path, e))
     }
 
     /// Writes the blob to `path`.

@@ -86,6 +86,12 @@ impl Segmenter {
         self.hw
     }
 
+    /// Bytes of network memory: the blob (weights, read in place), the activation arena and
+    /// the input and label maps.
+    pub fn memory_bytes(&self) -> usize {
+        self.blob.bytes().len() + self.arena.len() + self.input.len() + self.labels.len()
+    }
+
     /// The blob.
     pub fn blob(&self) -> &SlmBlob {
         &self.blob
