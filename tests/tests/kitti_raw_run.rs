@@ -46,3 +46,46 @@ fn drive_0005_ate_within_bound_and_deterministic() {
     semloc::traj::write_kitti(&b, &one).unwrap();
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "1 vs 2 threads differ");
 }
+
+/// The paper's front end with the committed int8 network: 40 frames of drive 0005 with
+/// `full` semantic weighting and EM association, network labels pipelined on the second
+/// thread. Two threads and one give the same poses; the network really labels frames (some
+/// candidates culled on the car and cyclist ahead); no loss.
+#[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
+fn drive_0005_with_network_semantics_is_deterministic() {
+    use semloc::nn::segment::Segmenter;
+    use semloc::nn::SlmBlob;
+    use semloc_core::assoc::Association;
+    use semloc_core::seg::WeightScheme;
+    let Some(data) = semloc_tests::shared_data() else { return };
+    let seq = Sequence::open_raw(&data.join("kitti-raw"), "2011_09_26_0005", None).unwrap();
+    let slm = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/artefacts/fastscnn_r2_192x640.slm");
+    let go = |threads: usize| {
+        let (w, h) = seq.image_size;
+        let params = TrackerParams { association: Association::Em, ..TrackerParams::default() };
+        let mut p = Pipeline::new(&seq.calib, w, h, params, threads).unwrap();
+        p.set_segmenter(Segmenter::new(SlmBlob::load(&slm).unwrap()).unwrap());
+        p.set_semantics(Some(WeightScheme::Full));
+        let (mut poses, mut culled) = (Vec::new(), 0u64);
+        for i in 0..40 {
+            let out = p.process_sequence_frame(&seq, i).unwrap();
+            assert!(out.times.seg_ms > 0.0, "frame {i} was not segmented");
+            poses.push(out.report.t_wc);
+            culled += u64::from(out.culled);
+        }
+        (poses, culled, p.tracker().stats().lost)
+    };
+    let (two, culled, lost) = go(2);
+    let (one, culled1, _) = go(1);
+    eprintln!("drive 0005, 40 frames, network semantics: {culled} candidates culled, lost {lost}");
+    assert_eq!(lost, 0);
+    assert!(culled > 1000, "only {culled} candidates culled: the network found no dynamic pixels");
+    assert_eq!(culled, culled1);
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("two.txt"), dir.path().join("one.txt"));
+    semloc::traj::write_kitti(&a, &two).unwrap();
+    semloc::traj::write_kitti(&b, &one).unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "1 vs 2 threads differ");
+}
