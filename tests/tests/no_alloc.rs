@@ -140,3 +140,31 @@ fn core_allocates_nothing_per_frame_on_kitti_raw() {
     });
     assert_eq!(allocations, 0, "heap allocations in core after the first frame");
 }
+
+/// The int8 network (the committed 192x640 model) labels KITTI-sized frames without a single
+/// heap allocation: the blob is read in place, activations live in the caller's arena, and
+/// the per-frame model view is re-attached, not re-parsed.
+#[test]
+fn segmentation_allocates_nothing() {
+    use semloc_core::nn::graph::{segment_frame, Kernels, Letterbox, SegBuffers};
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/artefacts/fastscnn_r2_192x640.slm");
+    let blob = semloc::nn::SlmBlob::load(&path).unwrap();
+    let (w, h) = (1241usize, 376usize);
+    let frames: Vec<Vec<u8>> =
+        (0..3).map(|k| (0..w * h).map(|i| ((i * 31 + k * 977) % 251) as u8).collect()).collect();
+    let arena_len = blob.model().unwrap().arena_len();
+    let (mut input, mut labels) = (vec![0u8; 192 * 640], vec![0u8; 192 * 640]);
+    let (mut arena, mut out) = (vec![0i8; arena_len], vec![0u8; w * h]);
+    let lb = Letterbox::fit(w, h, 192, 640).unwrap();
+    let reg = Region::new(GLOBAL);
+    for f in &frames {
+        let m = blob.model().unwrap();
+        let bufs = SegBuffers { input: &mut input, arena: &mut arena, labels: &mut labels };
+        segment_frame(&m, &lb, f, bufs, Kernels::Fast, &mut out).unwrap();
+    }
+    let allocs = reg.change().allocations;
+    assert!(out.iter().all(|&l| l <= 10));
+    assert_eq!(allocs, 0, "{allocs} heap allocations while segmenting 3 frames");
+}
