@@ -424,6 +424,12 @@ impl Pipeline {
                 Ok((img, labels, load, ms(t)))
             };
 
+        // Stereo + tracking once both extractions are done (the same call in both schedules).
+        let mut match_track =
+            |left: &KittiOrbExtractor, right: &KittiOrbExtractor, labels: Option<&GrayImage>| {
+                match_and_track(left, right, stereo, frame, tracker, params, labels, i, ts)
+            };
+
         let (l, r, pre, track) = if threads >= 2 {
             let (tx, rx) = std::sync::mpsc::sync_channel::<&KittiOrbExtractor>(1);
             let scoped = std::thread::scope(|s| {
@@ -440,17 +446,9 @@ impl Pipeline {
                 });
                 let l = left_work(left_ex, weights);
                 let track = match (&l, rx.recv()) {
-                    (Ok((_, labels, _, _)), Ok(right_ex)) => Some(match_and_track(
-                        left_ex,
-                        right_ex,
-                        stereo,
-                        frame,
-                        tracker,
-                        params,
-                        labels.as_ref(),
-                        i,
-                        ts,
-                    )),
+                    (Ok((_, labels, _, _)), Ok(right_ex)) => {
+                        Some(match_track(left_ex, right_ex, labels.as_ref()))
+                    }
                     _ => None,
                 };
                 let joined = h.join();
@@ -464,17 +462,9 @@ impl Pipeline {
             let r = right_work(right_ex);
             let l = left_work(left_ex, weights);
             let track = match (&l, &r) {
-                (Ok((_, labels, _, _)), Ok(_)) => Some(match_and_track(
-                    left_ex,
-                    right_ex,
-                    stereo,
-                    frame,
-                    tracker,
-                    params,
-                    labels.as_ref(),
-                    i,
-                    ts,
-                )),
+                (Ok((_, labels, _, _)), Ok(_)) => {
+                    Some(match_track(left_ex, right_ex, labels.as_ref()))
+                }
                 _ => None,
             };
             let pre =
