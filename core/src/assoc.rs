@@ -50,6 +50,9 @@ pub struct EmParams {
     pub max_hamming: u32,
     /// Weight below which a pair is left out of the M-step.
     pub min_weight: f64,
+    /// After the hard decisions, one last M-step on the kept pairs with χ² outlier rounds
+    /// (pairs ending as outliers are dropped).
+    pub final_refine: bool,
 }
 
 impl Default for EmParams {
@@ -61,6 +64,7 @@ impl Default for EmParams {
             class_prior: 0.5,
             max_hamming: 100,
             min_weight: 1e-3,
+            final_refine: true,
         }
     }
 }

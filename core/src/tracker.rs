@@ -739,19 +739,68 @@ impl Tracker {
             self.feat_lm[j] = id;
             self.feat_weight[j] = wb as f32;
         }
-        // Count, and clear the claims for the next frame (only the entries set).
+        // Clear the claims for the next frame (only the entries set).
+        for j in 0..n {
+            let id = self.feat_lm[j];
+            if id != NO_LANDMARK {
+                self.lm_claim[id as usize] = u16::MAX;
+            }
+        }
+        if self.params.em.final_refine {
+            self.refine_decided(feats);
+        }
         for j in 0..n {
             let id = self.feat_lm[j];
             if id == NO_LANDMARK {
                 continue;
             }
-            self.lm_claim[id as usize] = u16::MAX;
             inliers += 1;
             if self.cands[j].iter().next().is_some_and(|nn| nn.lm != id) {
                 changed += 1;
             }
         }
         (inliers, changed)
+    }
+
+    /// The last M-step, on the associations EM decided: pose optimisation weighted by each
+    /// kept pair's EM weight, with the backbone's rounds of χ² outlier classification; pairs
+    /// that end as outliers are dropped. Soft M-steps never reject a pair outright, so a few
+    /// confidently wrong pairs would otherwise stay in the pose and in the keyframe.
+    fn refine_decided(&mut self, feats: &[Feature]) {
+        self.pose_obs.clear();
+        for (j, f) in feats.iter().enumerate() {
+            let id = self.feat_lm[j];
+            if id == NO_LANDMARK {
+                continue;
+            }
+            let k = self.pose_obs.len();
+            let obs = PoseObs {
+                p_w: self.window.lm(id).p_w,
+                z: measurement(f),
+                weight: f64::from(self.feat_weight[j]),
+            };
+            if self.pose_obs.push(obs).is_err() {
+                break;
+            }
+            self.pose_feat[k] = j as u16;
+        }
+        let m = self.pose_obs.len();
+        self.outlier[..m].fill(false);
+        optimize_pose(
+            &self.cam,
+            &mut self.t_cw,
+            &self.pose_obs,
+            &mut self.outlier[..m],
+            &PoseOptParams::default(),
+        );
+        self.t_cw = renormalize(&self.t_cw);
+        for k in 0..m {
+            if self.outlier[k] {
+                let j = usize::from(self.pose_feat[k]);
+                self.feat_lm[j] = NO_LANDMARK;
+                self.feat_weight[j] = 0.0;
+            }
+        }
     }
 
     /// Number of cells of a 16x8 image grid holding at least one inlier of the last
