@@ -32,6 +32,9 @@ enum Command {
     /// The main job on an embedded default: a synthetic high-traffic drive tracked without and
     /// with semantics, side by side.
     Demo(cli::demo::DemoArgs),
+    /// The paper's ablation on one dataset: semantics off/cull/full x association hard/em in
+    /// one invocation, one table, and the share of features on static structure (Fig. 4).
+    Ablate(cli::ablate::AblateArgs),
     /// Time the pipeline per stage, against OpenCV's ORB and a one-thread run of itself.
     Bench(cli::bench::BenchArgs),
     /// Write a synthetic KITTI-layout stereo sequence with traffic, GT poses and labels.
@@ -50,6 +53,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(args) => cli::eval::run(&args),
         Command::Info(args) => cli::info::run(&args),
         Command::Run(args) => cli::run::run(&args),
+        Command::Ablate(args) => cli::ablate::run(&args),
         Command::Bench(args) => cli::bench::run(&args),
         Command::Demo(args) => cli::demo::run(&args),
         Command::Synth(args) => cli::synth::run(&args),

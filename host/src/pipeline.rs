@@ -191,6 +191,82 @@ pub struct FrameOutput {
     pub culled: u32,
 }
 
+/// Left-image ORB features counted by the category (the paper's Table 1) of the label under
+/// each key point: the measure of the paper's Fig. 4 (share of features on static structure).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[allow(missing_docs)] // one counter per category, named as `semloc_core::seg::Category`
+pub struct CategoryCounts {
+    pub human: u64,
+    pub vehicle: u64,
+    pub construction: u64,
+    pub object: u64,
+    pub flat: u64,
+    pub nature: u64,
+    pub sky: u64,
+    pub void: u64,
+}
+
+impl CategoryCounts {
+    /// Counts one feature of label `class`.
+    pub fn add(&mut self, class: u8) {
+        use semloc_core::seg::Category as C;
+        *match semloc_core::seg::category(class) {
+            C::Human => &mut self.human,
+            C::Vehicle => &mut self.vehicle,
+            C::Construction => &mut self.construction,
+            C::Object => &mut self.object,
+            C::Flat => &mut self.flat,
+            C::Nature => &mut self.nature,
+            C::Sky => &mut self.sky,
+            C::Void => &mut self.void,
+        } += 1;
+    }
+
+    /// Adds another tally.
+    pub fn merge(&mut self, o: &CategoryCounts) {
+        self.human += o.human;
+        self.vehicle += o.vehicle;
+        self.construction += o.construction;
+        self.object += o.object;
+        self.flat += o.flat;
+        self.nature += o.nature;
+        self.sky += o.sky;
+        self.void += o.void;
+    }
+
+    /// All features.
+    pub fn total(&self) -> u64 {
+        self.human
+            + self.vehicle
+            + self.construction
+            + self.object
+            + self.flat
+            + self.nature
+            + self.sky
+            + self.void
+    }
+
+    /// Features on static structure (construction and object classes, weighted ×3).
+    pub fn structure(&self) -> u64 {
+        self.construction + self.object
+    }
+
+    /// Features on dynamic classes (human, vehicle).
+    pub fn dynamic(&self) -> u64 {
+        self.human + self.vehicle
+    }
+
+    /// `part` as a percentage of all features (0 when there are none).
+    pub fn pct(&self, part: u64) -> f64 {
+        let t = self.total();
+        if t == 0 {
+            0.0
+        } else {
+            100.0 * part as f64 / t as f64
+        }
+    }
+}
+
 /// Core state for one stereo sequence.
 pub struct Pipeline {
     left: Box<KittiOrbExtractor>,
@@ -495,6 +571,38 @@ impl Pipeline {
             compute_ms: (total_ms - load_ms).max(0.0),
         };
         Ok(FrameOutput { report, stereo: stereo_stats, times, culled: self.culled() })
+    }
+
+    /// Extracts frame `i`'s left ORB features twice, plain and with `scheme`'s semantic
+    /// weights, and counts each set by the category under its key points (the paper's Fig. 4).
+    /// Labels come from the network when one is set, else from the dataset. Only the left
+    /// extractor is used; tracking state is untouched, so a pipeline kept for this alone can
+    /// measure a whole sequence.
+    pub fn feature_categories(
+        &mut self,
+        src: &(impl FrameSource + ?Sized),
+        i: usize,
+        scheme: WeightScheme,
+    ) -> Result<(CategoryCounts, CategoryCounts), PipelineError> {
+        let img = src.left(i)?.into_owned();
+        let labels = match self.segmenter.as_mut() {
+            Some(seg) => segment(seg, &img, i)?,
+            None => src.labels(i)?.into_owned(),
+        };
+        let count = |ex: &KittiOrbExtractor| {
+            let mut c = CategoryCounts::default();
+            for kp in ex.features().keypoints() {
+                let x = (kp.x.round().max(0.0) as u32).min(labels.width().saturating_sub(1));
+                let y = (kp.y.round().max(0.0) as u32).min(labels.height().saturating_sub(1));
+                c.add(labels.get_pixel(x, y)[0]);
+            }
+            c
+        };
+        extract(&mut self.left, &img, i, "left")?;
+        let plain = count(&self.left);
+        extract_weighted(&mut self.left, &img, &labels, scheme, &mut self.weights, i)?;
+        let weighted = count(&self.left);
+        Ok((plain, weighted))
     }
 
     /// Candidates the left extractor dropped for a zero weight on the last frame.

@@ -224,3 +224,82 @@ fn run_rejects_a_bad_thread_count() {
     let o = semloc(&["run", "/nonexistent", "--out", "/tmp/x", "--threads", "3"]);
     assert_eq!(o.status.code(), Some(2), "clap usage error");
 }
+
+#[test]
+fn ablate_runs_every_combination_into_one_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let o = semloc(&[
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--frames",
+        "12",
+        "--dynamics",
+        "high",
+        "--seed",
+        "3",
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let out = dir.path().join("abl");
+    let o = semloc(&[
+        "ablate",
+        data.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--semantics",
+        "off,full",
+        "--assoc",
+        "hard,em",
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    for row in ["off       hard", "off       em", "full      hard", "full      em"] {
+        assert!(stdout.contains(row), "row {row:?} missing:\n{stdout}");
+    }
+    assert!(stdout.contains("Fig. 4"), "{stdout}");
+    let table = std::fs::read_to_string(out.join("ablation.txt")).unwrap();
+    assert!(table.lines().count() > 6, "{table}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 4);
+    for r in rows {
+        assert!(r["ate_rmse_m"].as_f64().is_some_and(|a| a.is_finite()), "{r}");
+        let dir = out.join(r["folder"].as_str().unwrap());
+        assert!(dir.join("trajectory.txt").is_file(), "{}", dir.display());
+    }
+    // Only EM rows change associations; only semantic rows cull.
+    assert_eq!(rows[0]["em_changed_total"], 0);
+    assert!(rows[1]["em_changed_total"].as_u64().unwrap() > 0);
+    assert_eq!(rows[0]["median_culled_per_frame"].as_f64(), Some(0.0));
+    assert!(rows[2]["median_culled_per_frame"].as_f64().unwrap() > 0.0);
+    // Fig. 4: semantic ORB moves features off dynamic classes onto static structure.
+    let share = &v["feature_share"];
+    let pct = |k: &str| share[k].as_f64().unwrap();
+    assert!(pct("dynamic_pct_semantic") < pct("dynamic_pct_plain"), "{share}");
+    assert!(pct("structure_pct_semantic") > pct("structure_pct_plain"), "{share}");
+}
+
+#[test]
+fn ablate_without_labels_names_the_missing_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let seq = write_textured_sequence(dir.path(), 3);
+    let out = dir.path().join("abl");
+    let o = semloc(&["ablate", seq.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("semantic") && err.contains("--model"), "{err}");
+    // Geometry-only rows need no labels.
+    let o = semloc(&[
+        "ablate",
+        seq.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--semantics",
+        "off",
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    assert!(stdout.contains("off       em"), "{stdout}");
+}

@@ -9,8 +9,9 @@ use clap::Args;
 use semloc::dataset::Sequence;
 use semloc::synth::{generate, Dynamics, SynthConfig};
 
+use super::ablate::{run_rows, table};
 use super::eval::AlignArg;
-use super::run::{execute, RunConfig, RunOutcome, SemanticsArg};
+use super::run::{AssocArg, RunConfig, SemanticsArg};
 
 /// Arguments of `semloc demo`.
 #[derive(Args, Debug)]
@@ -28,6 +29,9 @@ pub struct DemoArgs {
     /// How dynamic the traffic is.
     #[arg(long, value_enum, default_value_t = DynamicsArg::High)]
     pub dynamics: DynamicsArg,
+    /// Label frames with this int8 network (`.slm`) instead of the generator's ground truth.
+    #[arg(long, value_name = "SLM")]
+    pub model: Option<PathBuf>,
 }
 
 /// `--dynamics` values.
@@ -66,57 +70,28 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         t.elapsed().as_secs_f64()
     );
     let seq = Sequence::open_odometry(&data, &cfg.seq, None)?;
-    let modes = [SemanticsArg::Off, SemanticsArg::Cull, SemanticsArg::Full];
-    let mut rows: Vec<(SemanticsArg, RunOutcome)> = Vec::new();
-    for mode in modes {
-        let rc = RunConfig {
-            threads: 2,
-            ransac_iterations: semloc_core::tracker::TrackerParams::default().ransac_iterations,
-            semantics: mode,
-            assoc: super::run::AssocArg::Hard,
-            align: AlignArg::Se3,
-            max_frames: None,
-            model: None,
-        };
-        let dir = out.join(format!("run-{}", format!("{mode:?}").to_lowercase()));
-        let o = execute(&seq, &rc, &dir)?;
-        if let Some(e) = &o.failure {
-            anyhow::bail!("tracking {mode:?} failed: {e}");
+    let base = RunConfig {
+        threads: 2,
+        ransac_iterations: semloc_core::tracker::TrackerParams::default().ransac_iterations,
+        semantics: SemanticsArg::Off,
+        assoc: AssocArg::Hard,
+        align: AlignArg::Se3,
+        max_frames: None,
+        model: args.model.clone(),
+    };
+    let pairs =
+        [SemanticsArg::Off, SemanticsArg::Cull, SemanticsArg::Full].map(|s| (s, AssocArg::Hard));
+    let rows = run_rows(&seq, &base, &pairs, &out)?;
+    println!();
+    print!("{}", table(&rows));
+    println!();
+    println!(
+        "semantics: labels are {}; 'cull' drops features on cars, pedestrians and cyclists, 'full' \
+         also weights buildings, fences, poles and signs x3 (the paper's semantic ORB).",
+        match &args.model {
+            Some(p) => format!("the int8 network's ({})", p.display()),
+            None => "the generator's ground truth (--model FILE.slm labels with the network)".into(),
         }
-        rows.push((mode, o));
-    }
-    println!();
-    println!(
-        "{:<10}{:>10}{:>12}{:>12}{:>16}{:>10}{:>8}{:>10}",
-        "semantics",
-        "ATE [m]",
-        "ATE [%len]",
-        "t_rel [%]",
-        "r_rel [°/100m]",
-        "ms/frame",
-        "lost",
-        "culled"
-    );
-    for (mode, o) in &rows {
-        let e = o.eval.as_ref();
-        let f = |v: Option<f64>| v.map_or("n/a".to_owned(), |x| format!("{x:.3}"));
-        println!(
-            "{:<10}{:>10}{:>12}{:>12}{:>16}{:>10.1}{:>8}{:>10.0}",
-            format!("{mode:?}").to_lowercase(),
-            f(e.map(|e| e.ate_rmse_m)),
-            f(e.map(|e| 100.0 * e.ate_rmse_m / e.path_length_m.max(1e-9))),
-            f(e.and_then(|e| e.t_rel_pct)),
-            f(e.and_then(|e| e.r_rel_deg_per_100m)),
-            o.summary.timing.get("compute").map_or(f64::NAN, |p| p.median_ms),
-            o.summary.lost,
-            o.summary.median_culled,
-        );
-    }
-    println!();
-    println!(
-        "semantics: labels are the generator's ground truth (the network arrives with the \
-         segmentation model); 'cull' drops features on cars, pedestrians and cyclists, 'full' \
-         also weights buildings, fences, poles and signs x3 (the paper's semantic ORB)."
     );
     println!("sequence, trajectories, plots: {}", out.display());
     Ok(())

@@ -1,5 +1,6 @@
 //! Subcommands of the `semloc` binary.
 
+pub mod ablate;
 pub mod bench;
 pub mod convert;
 pub mod demo;

@@ -1,0 +1,301 @@
+//! `semloc ablate`: the paper's ablation on one dataset — every combination of semantics
+//! (`off`, `cull`, `full`) and association (`hard`, `em`) tracked in one invocation, one table
+//! (ATE, t_rel, r_rel, ms/frame, features culled, associations EM changed), plus the share of
+//! features on static structure with plain and with semantic ORB (the paper's Fig. 4).
+
+use core::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use semloc::dataset::Sequence;
+use semloc::pipeline::{CategoryCounts, Pipeline};
+use semloc_core::seg::WeightScheme;
+use semloc_core::tracker::TrackerParams;
+
+use super::eval::AlignArg;
+use super::info::DatasetArgs;
+use super::run::{execute, AssocArg, RunConfig, RunOutcome, SemanticsArg};
+
+/// Arguments of `semloc ablate`.
+#[derive(Args, Debug)]
+pub struct AblateArgs {
+    /// The dataset.
+    #[command(flatten)]
+    pub data: DatasetArgs,
+    /// Output folder (created): one `semantics-assoc/` folder per row with everything `semloc
+    /// run` writes, plus `ablation.json` and `ablation.txt` (the table).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The segmentation network (`.slm`) that labels the frames for the semantic rows; without
+    /// it the sequence's own `semantic/` labels are used (synthetic sequences have them).
+    #[arg(long, value_name = "SLM")]
+    pub model: Option<PathBuf>,
+    /// Semantic settings to run (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "off,cull,full")]
+    pub semantics: Vec<SemanticsArg>,
+    /// Association settings to run (comma-separated).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "hard,em")]
+    pub assoc: Vec<AssocArg>,
+    /// Process only the first N frames.
+    #[arg(long, value_name = "N")]
+    pub max_frames: Option<usize>,
+    /// Worker threads for every row (1 or 2; results are identical, timings are not).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub threads: u8,
+    /// ATE alignment (see `semloc eval --help`).
+    #[arg(long, value_enum, default_value_t = AlignArg::Se3)]
+    pub align: AlignArg,
+}
+
+/// One row of an ablation or demo table.
+pub struct Row {
+    /// Semantic setting.
+    pub semantics: SemanticsArg,
+    /// Association setting.
+    pub assoc: AssocArg,
+    /// What the run produced.
+    pub outcome: RunOutcome,
+}
+
+/// One row of `ablation.json`.
+#[derive(serde::Serialize)]
+struct JsonRow<'a> {
+    semantics: String,
+    association: String,
+    ate_rmse_m: Option<f64>,
+    t_rel_pct: Option<f64>,
+    r_rel_deg_per_100m: Option<f64>,
+    path_length_m: Option<f64>,
+    compute_median_ms: Option<f64>,
+    compute_p99_ms: Option<f64>,
+    lost: u32,
+    median_culled_per_frame: f64,
+    em_changed_total: u64,
+    folder: &'a str,
+}
+
+/// Fig. 4 of the paper on this dataset: features by category, plain and semantic ORB.
+#[derive(serde::Serialize)]
+struct Share {
+    frames: usize,
+    plain: CategoryCounts,
+    semantic: CategoryCounts,
+    structure_pct_plain: f64,
+    structure_pct_semantic: f64,
+    dynamic_pct_plain: f64,
+    dynamic_pct_semantic: f64,
+}
+
+fn lower<T: core::fmt::Debug>(v: T) -> String {
+    format!("{v:?}").to_lowercase()
+}
+
+/// Formats the table of `rows` (one line each), as `semloc ablate` and `semloc demo` print it.
+pub fn table(rows: &[Row]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9}{:>11}",
+        "semantics",
+        "assoc",
+        "ATE [m]",
+        "ATE %",
+        "t_rel [%]",
+        "r_rel [°/",
+        "ms/frame",
+        "p99 ms",
+        "lost",
+        "culled",
+        "EM changed"
+    );
+    let _ = writeln!(
+        s,
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9}{:>11}",
+        "", "", "", "of len", "", "100 m]", "median", "", "", "/frame", "total"
+    );
+    for r in rows {
+        let e = r.outcome.eval.as_ref();
+        let f = |v: Option<f64>, d: usize| v.map_or("n/a".to_owned(), |x| format!("{x:.d$}"));
+        let compute = r.outcome.summary.timing.get("compute");
+        let _ = writeln!(
+            s,
+            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9.0}{:>11}",
+            lower(r.semantics),
+            lower(r.assoc),
+            f(e.map(|e| e.ate_rmse_m), 3),
+            f(e.map(|e| 100.0 * e.ate_rmse_m / e.path_length_m.max(1e-9)), 2),
+            f(e.and_then(|e| e.t_rel_pct), 3),
+            f(e.and_then(|e| e.r_rel_deg_per_100m), 3),
+            f(compute.map(|p| p.median_ms), 1),
+            f(compute.map(|p| p.p99_ms), 1),
+            r.outcome.summary.lost,
+            r.outcome.summary.median_culled,
+            r.outcome.summary.em_changed_total,
+        );
+    }
+    s
+}
+
+/// Tracks `seq` once per (semantics, assoc) pair with everything else equal; each row's
+/// outputs go to `out/<semantics>-<assoc>/`. A row whose tracking stops early is an error
+/// naming the row (its outputs so far are kept).
+pub fn run_rows(
+    seq: &Sequence,
+    base: &RunConfig,
+    pairs: &[(SemanticsArg, AssocArg)],
+    out: &std::path::Path,
+) -> Result<Vec<Row>> {
+    let mut rows = Vec::new();
+    for &(semantics, assoc) in pairs {
+        let cfg = RunConfig {
+            semantics,
+            assoc,
+            // the network is only needed (and only timed) where labels are used
+            model: if semantics == SemanticsArg::Off { None } else { base.model.clone() },
+            ..base.clone()
+        };
+        let dir = out.join(format!("{}-{}", lower(semantics), lower(assoc)));
+        eprintln!("{} / {} ...", lower(semantics), lower(assoc));
+        let outcome = execute(seq, &cfg, &dir)?;
+        if let Some(e) = &outcome.failure {
+            anyhow::bail!(
+                "semantics {} / assoc {} stopped after {} frames: {e} (outputs so far in {})",
+                lower(semantics),
+                lower(assoc),
+                outcome.summary.frames_processed,
+                dir.display()
+            );
+        }
+        rows.push(Row { semantics, assoc, outcome });
+    }
+    Ok(rows)
+}
+
+/// Counts left-image features by category over the first `n` frames, plain and with the
+/// paper's semantic ORB weights.
+fn feature_share(seq: &Sequence, model: Option<&PathBuf>, n: usize) -> Result<Share> {
+    let (w, h) = seq.image_size;
+    let mut pipe = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), 1)?;
+    if let Some(p) = model {
+        let seg = semloc::nn::segment::Segmenter::new(semloc::nn::SlmBlob::load(p)?)?;
+        seg.letterbox(w as usize, h as usize)
+            .with_context(|| format!("{} on {w}x{h} frames", p.display()))?;
+        pipe.set_segmenter(seg);
+    }
+    let (mut plain, mut semantic) = (CategoryCounts::default(), CategoryCounts::default());
+    let pb = super::progress(n as u64, "Fig. 4");
+    for i in 0..n {
+        let (p, s) = pipe.feature_categories(seq, i, WeightScheme::Full)?;
+        plain.merge(&p);
+        semantic.merge(&s);
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    Ok(Share {
+        frames: n,
+        structure_pct_plain: plain.pct(plain.structure()),
+        structure_pct_semantic: semantic.pct(semantic.structure()),
+        dynamic_pct_plain: plain.pct(plain.dynamic()),
+        dynamic_pct_semantic: semantic.pct(semantic.dynamic()),
+        plain,
+        semantic,
+    })
+}
+
+/// Runs `semloc ablate`.
+pub fn run(args: &AblateArgs) -> Result<()> {
+    let seq = args.data.open()?;
+    let labelled = args.model.is_some() || seq.has_labels();
+    if !labelled && args.semantics.iter().any(|&s| s != SemanticsArg::Off) {
+        anyhow::bail!(
+            "the semantic rows need labels: give the network with --model FILE.slm, use a \
+             sequence with a {} folder, or run only --semantics off",
+            seq.root.join("semantic").display()
+        );
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating output folder {}", args.out.display()))?;
+    let base = RunConfig {
+        threads: args.threads,
+        ransac_iterations: TrackerParams::default().ransac_iterations,
+        semantics: SemanticsArg::Off,
+        assoc: AssocArg::Hard,
+        align: args.align,
+        max_frames: args.max_frames,
+        model: args.model.clone(),
+    };
+    let pairs: Vec<(SemanticsArg, AssocArg)> =
+        args.semantics.iter().flat_map(|&s| args.assoc.iter().map(move |&a| (s, a))).collect();
+    let rows = run_rows(&seq, &base, &pairs, &args.out)?;
+    let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
+    let share = if labelled { Some(feature_share(&seq, args.model.as_ref(), n)?) } else { None };
+
+    let mut text = format!(
+        "{} frames of {} ({} thread(s)); labels: {}\n\n",
+        n,
+        seq.summary().name,
+        args.threads,
+        match &args.model {
+            Some(p) => format!("int8 network {}", p.display()),
+            None if labelled => "the sequence's semantic/ folder".to_owned(),
+            None => "none".to_owned(),
+        }
+    );
+    text.push_str(&table(&rows));
+    if let Some(s) = &share {
+        let _ = write!(
+            text,
+            "\nfeatures on static structure (construction + object), left images, {} frames \
+             (paper Fig. 4):\n  plain ORB {:.1} % of {} features, semantic ORB {:.1} % of {}; \
+             on dynamic classes {:.1} % -> {:.1} %\n",
+            s.frames,
+            s.structure_pct_plain,
+            s.plain.total(),
+            s.structure_pct_semantic,
+            s.semantic.total(),
+            s.dynamic_pct_plain,
+            s.dynamic_pct_semantic
+        );
+    }
+    print!("{text}");
+    let p = args.out.join("ablation.txt");
+    std::fs::write(&p, &text).with_context(|| format!("writing {}", p.display()))?;
+    let folders: Vec<String> =
+        rows.iter().map(|r| format!("{}-{}", lower(r.semantics), lower(r.assoc))).collect();
+    let json_rows: Vec<JsonRow<'_>> = rows
+        .iter()
+        .zip(&folders)
+        .map(|(r, folder)| {
+            let e = r.outcome.eval.as_ref();
+            let c = r.outcome.summary.timing.get("compute");
+            JsonRow {
+                semantics: lower(r.semantics),
+                association: lower(r.assoc),
+                ate_rmse_m: e.map(|e| e.ate_rmse_m),
+                t_rel_pct: e.and_then(|e| e.t_rel_pct),
+                r_rel_deg_per_100m: e.and_then(|e| e.r_rel_deg_per_100m),
+                path_length_m: e.map(|e| e.path_length_m),
+                compute_median_ms: c.map(|p| p.median_ms),
+                compute_p99_ms: c.map(|p| p.p99_ms),
+                lost: r.outcome.summary.lost,
+                median_culled_per_frame: r.outcome.summary.median_culled,
+                em_changed_total: r.outcome.summary.em_changed_total,
+                folder,
+            }
+        })
+        .collect();
+    let json = serde_json::json!({
+        "dataset": seq.summary(),
+        "frames": n,
+        "threads": args.threads,
+        "model": args.model,
+        "rows": json_rows,
+        "feature_share": share,
+    });
+    let p = args.out.join("ablation.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&json)?)
+        .with_context(|| format!("writing {}", p.display()))?;
+    println!("outputs in {}", args.out.display());
+    Ok(())
+}
