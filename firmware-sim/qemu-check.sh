@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# Bare-metal check of semloc-firmware-sim (see firmware-sim/README.md):
+#  1. builds the aarch64-unknown-none image, the thumbv7em size probe and the host runner;
+#  2. runs the embedded frames on the host (x86-64, std) and under
+#     qemu-system-aarch64 -M virt -cpu cortex-a72 (semihosting), with a timeout, twice each:
+#     geometric (ORB + stereo + tracker) and semantic (int8 network + semantic ORB + EM);
+#  3. requires both to exit 0 (tracked in both runs), the output to be non-empty and, after
+#     dropping the target-specific `@` lines, byte-identical: the same f64 pose bits, label
+#     hashes and pose hashes;
+#  4. prints the section sizes of both bare-metal builds;
+#  5. with SEMLOC_BIN=path/to/semloc, also requires the poses to be bit-identical to the host
+#     pipeline's (`semloc run --threads 1`, see host_pipeline_check.py).
+# Exit 0 only if all of that holds. Environment: CARGO_TARGET_DIR (default: target/),
+# QEMU (default: qemu-system-aarch64), QEMU_TIMEOUT_S (default: 300), SEMLOC_BIN (optional).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$ROOT/target}"
+QEMU="${QEMU:-qemu-system-aarch64}"
+TIMEOUT_S="${QEMU_TIMEOUT_S:-300}"
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+
+command -v "$QEMU" >/dev/null || {
+  echo "qemu-check: $QEMU not found (Debian/Ubuntu: apt-get install qemu-system-arm)" >&2
+  exit 1
+}
+
+echo "== build"
+cargo build --release -p semloc-firmware-sim --target aarch64-unknown-none --bin qemu_aarch64
+cargo build --release -p semloc-firmware-sim --target thumbv7em-none-eabihf --bin thumbv7em_size
+cargo build --release -p semloc-firmware-sim --bin host_poses
+IMG="$CARGO_TARGET_DIR/aarch64-unknown-none/release/qemu_aarch64"
+PROBE="$CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/thumbv7em_size"
+HOST="$CARGO_TARGET_DIR/release/host_poses"
+
+echo "== host (x86-64, std)"
+host_rc=0
+"$HOST" >"$WORK/host.txt" || host_rc=$?
+echo "host_poses exit status $host_rc"
+
+echo "== qemu ($QEMU -M virt -cpu cortex-a72, timeout ${TIMEOUT_S}s)"
+t0=$(date +%s%N)
+qemu_rc=0
+# Semihosting output goes to a file chardev: without one QEMU picks stdout or stderr
+# depending on how its own stdio is set up.
+: >"$WORK/qemu.txt"
+timeout "$TIMEOUT_S" "$QEMU" -M virt -cpu cortex-a72 -m 256M -nographic -monitor none \
+  -chardev "file,id=semihost,path=$WORK/qemu.txt" \
+  -semihosting-config enable=on,target=native,chardev=semihost -kernel "$IMG" \
+  </dev/null >"$WORK/qemu.log" 2>&1 || qemu_rc=$?
+t1=$(date +%s%N)
+echo "qemu exit status $qemu_rc, wall $(( (t1 - t0) / 1000000 )) ms"
+cat "$WORK/qemu.log" >&2
+grep '^@' "$WORK/qemu.txt" || true
+
+# Semihosting writes the bytes as they are; drop CRs a terminal layer might add.
+tr -d '\r' <"$WORK/qemu.txt" | grep -v '^@' >"$WORK/qemu.cmp" || true
+grep -v '^@' "$WORK/host.txt" >"$WORK/host.cmp" || true
+
+echo "== sizes (bytes; aarch64 'other' is the 64 MiB NOLOAD stack)"
+python3 firmware-sim/elf_sizes.py "$PROBE" "$IMG"
+
+echo "== result"
+fail=0
+if [ "$host_rc" -ne 0 ]; then echo "FAIL: host_poses exited $host_rc"; fail=1; fi
+if [ "$qemu_rc" -ne 0 ]; then echo "FAIL: qemu exited $qemu_rc (124: timeout)"; fail=1; fi
+poses=$(grep -c -E '^([0-9a-f]{16} ){11}[0-9a-f]{16}$' "$WORK/host.cmp" || true)
+if [ "$poses" -lt 2 ] || ! grep -q '^fnv1a64 [0-9a-f]\{16\}$' "$WORK/host.cmp"; then
+  echo "FAIL: host output has $poses pose lines or no hash line"; fail=1
+fi
+distinct=$(grep -E '^([0-9a-f]{16} ){11}[0-9a-f]{16}$' "$WORK/host.cmp" | sort -u | wc -l)
+if [ "$distinct" -lt 2 ]; then echo "FAIL: the poses do not move"; fail=1; fi
+runs=$(grep -c '^# summary' "$WORK/host.cmp" || true)
+tracked=$(grep -c '^# summary.* tracked yes$' "$WORK/host.cmp" || true)
+if [ "$runs" -lt 2 ] || [ "$tracked" -ne "$runs" ]; then
+  echo "FAIL: the tracker tracked in $tracked of $runs runs (want geometric + semantic)"; fail=1
+fi
+if diff -u "$WORK/host.cmp" "$WORK/qemu.cmp"; then
+  echo "host and qemu outputs are identical ($poses poses in $runs runs:" \
+    "$(grep '^fnv1a64' "$WORK/host.cmp" | tr '\n' ' '))"
+else
+  echo "FAIL: host and qemu outputs differ"; fail=1
+fi
+grep '^# summary' "$WORK/host.cmp"
+if [ -n "${SEMLOC_BIN:-}" ]; then
+  echo "== the host pipeline (\`$SEMLOC_BIN run --threads 1\`) on the same frames"
+  python3 firmware-sim/host_pipeline_check.py "$SEMLOC_BIN" "$WORK/qemu.cmp" || {
+    echo "FAIL: the firmware poses differ from the host pipeline's"; fail=1
+  }
+else
+  echo "(set SEMLOC_BIN=target/release/semloc to also compare with \`semloc run --threads 1\`)"
+fi
+if [ "$fail" -ne 0 ]; then
+  echo "--- host output"; cat "$WORK/host.txt"
+  echo "--- qemu output"; cat "$WORK/qemu.txt"
+  exit 1
+fi
+echo "qemu-check: OK"

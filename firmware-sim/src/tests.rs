@@ -1,0 +1,226 @@
+//! Unit tests on the host: output format, hash, the embedded data, and the localiser on the
+//! embedded frames (tracks, close to the ground truth, deterministic).
+
+use std::string::String;
+
+use crate::embedded::{self, CAMERA, FRAMES, HEIGHT, WIDTH};
+use crate::report::{self, pose_error, write_pose_line, Fnv1a, RunSummary};
+use crate::Localiser;
+
+/// Stack for threads that build the ≈ 10 MiB localiser.
+const BIG_STACK_BYTES: usize = 64 << 20;
+
+fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    std::thread::Builder::new()
+        .stack_size(BIG_STACK_BYTES)
+        .spawn(f)
+        .expect("spawn")
+        .join()
+        .expect("worker panicked")
+}
+
+/// The whole report text and summary of one run over the embedded frames.
+fn run_once() -> (String, RunSummary) {
+    on_big_stack(|| {
+        let mut loc =
+            Box::new(Localiser::new_embedded(crate::geometric_params()).expect("localiser"));
+        let mut text = String::new();
+        let s = report::run_embedded(&mut loc, None, &mut text, |_, _| Ok(())).expect("run");
+        (text, s)
+    })
+}
+
+#[test]
+fn fnv1a_reference_values() {
+    // Published FNV-1a 64-bit test vectors.
+    let h = |s: &str| {
+        let mut f = Fnv1a::new();
+        f.write(s.as_bytes());
+        f.finish()
+    };
+    assert_eq!(h(""), 0xcbf2_9ce4_8422_2325);
+    assert_eq!(h("a"), 0xaf63_dc4c_8601_ec8c);
+    assert_eq!(h("foobar"), 0x8594_4171_f739_67e8);
+}
+
+#[test]
+fn pose_line_is_twelve_bit_patterns() {
+    let mut row = [0.0; 12];
+    row[0] = 1.0;
+    row[5] = 1.0;
+    row[10] = 1.0;
+    row[3] = -0.5;
+    let mut s = String::new();
+    write_pose_line(&mut s, &row).unwrap();
+    assert_eq!(
+        s,
+        "3ff0000000000000 0000000000000000 0000000000000000 bfe0000000000000 \
+         0000000000000000 3ff0000000000000 0000000000000000 0000000000000000 \
+         0000000000000000 0000000000000000 3ff0000000000000 0000000000000000\n"
+    );
+    let back: Vec<f64> =
+        s.split_whitespace().map(|t| f64::from_bits(u64::from_str_radix(t, 16).unwrap())).collect();
+    assert_eq!(back, row);
+}
+
+#[test]
+fn pose_error_of_known_offsets() {
+    let id = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    assert_eq!(pose_error(&id, &id), (0.0, 0.0));
+    let mut moved = id;
+    moved[3] = 3.0;
+    moved[11] = 4.0;
+    assert_eq!(pose_error(&moved, &id).0, 5.0);
+    // 10° about the y axis.
+    let (s, c) = 10f64.to_radians().sin_cos();
+    let rot = [c, 0.0, s, 0.0, 0.0, 1.0, 0.0, 0.0, -s, 0.0, c, 0.0];
+    let (t, r) = pose_error(&rot, &id);
+    assert_eq!(t, 0.0);
+    assert!((r - 10.0).abs() < 1e-6, "{r}");
+}
+
+#[test]
+fn embedded_data_is_consistent() {
+    assert!(FRAMES.len() >= 4, "{} frames", FRAMES.len());
+    for (i, f) in FRAMES.iter().enumerate() {
+        assert_eq!(f.left.len(), WIDTH * HEIGHT, "frame {i}");
+        assert_eq!(f.right.len(), WIDTH * HEIGHT, "frame {i}");
+        assert!(f.left != f.right, "frame {i}: left and right must differ");
+        assert!((f.timestamp_s - i as f64 * 0.1).abs() < 1e-9, "frame {i}: 10 Hz");
+    }
+    assert_eq!(pose_error(&FRAMES[0].gt_pose, &FRAMES[0].gt_pose), (0.0, 0.0));
+    let id = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let (t, r) = pose_error(&FRAMES[0].gt_pose, &id);
+    assert!(t < 1e-12 && r < 1e-6, "ground truth starts at the identity: {t} m, {r} deg");
+    // The principal point moved with the crop and stays inside it.
+    assert!(CAMERA.cx_px > 0.0 && CAMERA.cx_px < WIDTH as f64);
+    assert!(CAMERA.cy_px > 0.0 && CAMERA.cy_px < HEIGHT as f64);
+    assert!(embedded::SOURCE.contains("semloc synth"));
+}
+
+#[test]
+fn localiser_fits_its_budget() {
+    // Two extractors, matcher, frame and tracker; printed for the README's figures.
+    println!(
+        "Localiser::MEMORY_BYTES = {} (budget {})",
+        Localiser::MEMORY_BYTES,
+        crate::LOCALISER_BUDGET_BYTES
+    );
+    // The state is the core pieces and nothing else (up to padding).
+    use core::mem::size_of;
+    use semloc_core::tracker::Tracker;
+    use semloc_core::{frame::Frame, orb::KittiOrbExtractor, stereo::KittiStereoMatcher};
+    let parts = 2 * size_of::<KittiOrbExtractor>()
+        + size_of::<KittiStereoMatcher>()
+        + size_of::<Frame>()
+        + size_of::<Tracker>();
+    let total = core::hint::black_box(Localiser::MEMORY_BYTES);
+    assert!(total >= parts && total - parts < 256, "{total} vs {parts}");
+}
+
+#[test]
+fn tracks_the_embedded_sequence_deterministically() {
+    let (a, sa) = run_once();
+    print!("{a}");
+    assert_eq!(sa.frames as usize, FRAMES.len());
+    assert!(sa.tracked(), "did not track: {sa:?}");
+    assert!(sa.max_err_r_deg < 0.5, "rotation error {} deg", sa.max_err_r_deg);
+    // Pose lines: one per frame, 12 hex numbers each; then the hash line.
+    let poses: Vec<&str> =
+        a.lines().filter(|l| !l.starts_with('#') && !l.starts_with("fnv1a64")).collect();
+    assert_eq!(poses.len(), FRAMES.len());
+    assert!(poses.iter().all(|l| l.split(' ').count() == 12 && l.len() == 12 * 17 - 1));
+    assert_eq!(a.lines().last(), Some(format!("fnv1a64 {:016x}", sa.hash).as_str()));
+    // A second run from a fresh localiser gives the same bits.
+    let (b, sb) = run_once();
+    assert_eq!(a, b);
+    assert_eq!(sa, sb);
+}
+
+/// The semantic run (network, semantic ORB, EM): text and summary.
+fn run_semantic() -> (String, RunSummary) {
+    on_big_stack(|| {
+        let mut loc = Box::new(Localiser::new_embedded(crate::semantic_params()).expect("loc"));
+        let mut storage = Box::new(crate::SegStorage::new());
+        let mut sem = crate::Semantics::new(
+            embedded::MODEL_BLOB,
+            WIDTH,
+            HEIGHT,
+            crate::SEMANTIC_SCHEME,
+            storage.memory(),
+        )
+        .expect("semantics");
+        let mut text = String::new();
+        let s =
+            report::run_embedded(&mut loc, Some(&mut sem), &mut text, |_, _| Ok(())).expect("run");
+        (text, s)
+    })
+}
+
+#[test]
+fn semantic_run_tracks_deterministically_and_labels_frames() {
+    let (a, sa) = run_semantic();
+    print!("{a}");
+    assert!(sa.tracked(), "did not track: {sa:?}");
+    assert!(sa.max_err_r_deg < 0.5, "rotation error {} deg", sa.max_err_r_deg);
+    // One labels line per frame; the parked cars are labelled (potentially dynamic).
+    let dynamic: Vec<u64> = a
+        .lines()
+        .filter_map(|l| l.split_once("labels: dynamic_px ")?.1.split(' ').next()?.parse().ok())
+        .collect();
+    assert_eq!(dynamic.len(), FRAMES.len());
+    assert!(dynamic.iter().all(|&d| d > 0 && d < (WIDTH * HEIGHT / 2) as u64), "{dynamic:?}");
+    // The semantic weights change the features, so the poses are not the geometric run's.
+    let (g, sg) = run_once();
+    assert_ne!(sg.hash, sa.hash);
+    assert!(!g.contains("labels:"));
+    let (b, sb) = run_semantic();
+    assert_eq!(a, b);
+    assert_eq!(sa, sb);
+}
+
+#[test]
+fn semantics_refuses_small_buffers() {
+    let mut arena = vec![0i8; 1000];
+    let (mut i, mut m, mut l, mut w) = (
+        vec![0u8; WIDTH * HEIGHT],
+        vec![0u8; WIDTH * HEIGHT],
+        vec![0u8; WIDTH * HEIGHT],
+        vec![0u8; 10],
+    );
+    let mem = crate::SegMemory {
+        arena: &mut arena,
+        input: &mut i,
+        model_labels: &mut m,
+        labels: &mut l,
+        weights: &mut w,
+    };
+    let r = crate::Semantics::new(embedded::MODEL_BLOB, WIDTH, HEIGHT, crate::SEMANTIC_SCHEME, mem);
+    assert!(
+        matches!(
+            r,
+            Err(crate::LocaliserError::Model(semloc_core::nn::model::ModelError::Truncated { .. }))
+        ),
+        "{:?}",
+        r.err()
+    );
+}
+
+#[test]
+fn wrong_buffer_size_is_an_error_not_a_panic() {
+    on_big_stack(|| {
+        let mut loc =
+            Box::new(Localiser::new_embedded(crate::geometric_params()).expect("localiser"));
+        let short = vec![0u8; 100];
+        let r = loc.process_raw(&short, &short, WIDTH, HEIGHT, 0.0, None);
+        assert!(matches!(r, Err(crate::LocaliserError::Image(_))), "{r:?}");
+    });
+}
+
+#[test]
+fn segmentation_memory_figures() {
+    let m = semloc_core::nn::model::Model::parse(embedded::MODEL_BLOB).expect("model");
+    let need = crate::SegMemory::bytes_needed(&m, WIDTH, HEIGHT);
+    println!("model {} bytes, arena/map/frame {need:?}", embedded::MODEL_BLOB.len());
+    assert_eq!(m.input_size(), (HEIGHT, WIDTH));
+}
