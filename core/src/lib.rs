@@ -18,6 +18,18 @@
 //! - [`orb`]: ORB extraction as ORB-SLAM2's `ORBextractor`, in fixed memory, with a
 //!   semantic weight hook.
 #![cfg_attr(not(test), no_std)]
+// Nothing reachable from input may panic through these (indexing is bounded by the checks at
+// each entry, fuzzed in tests/fuzz); tests may unwrap.
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]
 
 pub mod assoc;
 pub mod frame;

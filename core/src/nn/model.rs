@@ -801,8 +801,13 @@ impl<'a> Model<'a> {
         let ops_off = get32(blob, 44) as usize;
         let data_off = get32(blob, 48) as usize;
         let data_len = get32(blob, 52) as usize;
-        let t_end = tensors_off + TENSOR_RECORD * n_tensors;
-        let o_end = ops_off + OP_RECORD * n_ops;
+        // Checked: on 32-bit targets (thumbv7em) an offset near u32::MAX plus the record
+        // bytes would wrap and pass the ordering checks.
+        let t_end = tensors_off.checked_add(TENSOR_RECORD * n_tensors);
+        let o_end = ops_off.checked_add(OP_RECORD * n_ops);
+        let (Some(t_end), Some(o_end)) = (t_end, o_end) else {
+            return Err(ModelError::BadSection);
+        };
         let sections_ok = tensors_off >= HEADER_LEN
             && ops_off >= t_end
             && data_off >= o_end

@@ -69,7 +69,9 @@ pub fn harris_numerator(img: &ImageView<'_>, x: usize, y: usize) -> i64 {
 fn numerator_wide(img: &ImageView<'_>, xs: usize, y: usize) -> i64 {
     const R: usize = HARRIS_BLOCK_SIZE / 2;
     let row = |yy: usize| -> [i16; 10] {
-        let s: &[u8; 10] = img.row(yy)[xs..xs + 10].try_into().expect("10 columns");
+        // the caller keeps 10 columns of margin; a short row would read as zeros, not panic
+        let s: &[u8; 10] =
+            img.row(yy).get(xs..).and_then(|s| s.first_chunk::<10>()).unwrap_or(&[0; 10]);
         s.map(i16::from)
     };
     // Per row: horizontal difference and smoothing (the separable halves of the Sobel pair).
