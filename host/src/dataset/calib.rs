@@ -77,10 +77,26 @@ impl CalibFile {
         Ok(Matrix3::from_row_slice(&v))
     }
 
+    /// A rotation (9 numbers, row-major): orthonormal to 1e-3 with determinant +1, as KITTI's
+    /// 7-digit files are to ~1e-6. Anything else (a degenerate or scaled matrix) is a
+    /// `BadCalib` error rather than poses that silently blow up when inverted.
+    pub(crate) fn rotation(&self, key: &str) -> Result<Matrix3<f64>, DatasetError> {
+        let r = self.mat3(key)?;
+        let off = (r.transpose() * r - Matrix3::identity()).abs().max();
+        let det = r.determinant();
+        if !(off <= 1e-3 && (det - 1.0).abs() <= 1e-3) {
+            return Err(DatasetError::BadCalib {
+                path: self.path.clone(),
+                msg: format!("`{key}` is not a rotation (|RᵀR − I| = {off:.3e}, det = {det:.6})"),
+            });
+        }
+        Ok(r)
+    }
+
     /// The rigid transform of a raw `calib_*_to_*.txt` file (`R:` 9 numbers, `T:` 3) as a 4x4
     /// homogeneous matrix, exactly as pykitti's `transform_from_rot_trans`.
     pub(crate) fn rigid(&self) -> Result<Matrix4<f64>, DatasetError> {
-        let r = self.mat3("R")?;
+        let r = self.rotation("R")?;
         let t = self.numbers("T", 3)?;
         Ok(homogeneous(&r, &Vector3::new(t[0], t[1], t[2])))
     }

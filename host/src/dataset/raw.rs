@@ -237,7 +237,7 @@ fn cam_from_imu(
 ) -> Result<Matrix4<f64>, DatasetError> {
     let velo_to_cam = CalibFile::read(&date_dir.join("calib_velo_to_cam.txt"))?.rigid()?;
     let imu_to_velo = CalibFile::read(&date_dir.join("calib_imu_to_velo.txt"))?.rigid()?;
-    let r_rect = homogeneous(&cam_to_cam.mat3("R_rect_00")?, &Vector3::zeros());
+    let r_rect = homogeneous(&cam_to_cam.rotation("R_rect_00")?, &Vector3::zeros());
     let mut t_l = Matrix4::identity();
     t_l[(0, 3)] = p_left[3] / p_left[0];
     Ok((t_l * (r_rect * velo_to_cam)) * imu_to_velo)
@@ -259,7 +259,7 @@ fn camera_poses(
     let first_inv = first.try_inverse().ok_or_else(singular)?;
     // G_0 = T⁻¹T is the identity up to rounding (~1e-16); store it exactly, as KITTI's
     // pose files do, so "first pose is the identity" holds bit for bit.
-    Ok(core::iter::once(Se3::identity())
+    let poses: Vec<Se3> = core::iter::once(Se3::identity())
         .chain(w_cam.iter().skip(1).map(|t| {
             let g = first_inv * t;
             Se3::new(
@@ -267,7 +267,20 @@ fn camera_poses(
                 g.fixed_view::<3, 1>(0, 3).into_owned(),
             )
         }))
-        .collect())
+        .collect();
+    // Finite inputs can still overflow (an extreme altitude or longitude); never hand out
+    // non-finite ground truth.
+    if let Some(i) =
+        poses.iter().position(|p| !p.trans.iter().chain(p.rot.iter()).all(|v| v.is_finite()))
+    {
+        return Err(DatasetError::BadCalib {
+            path: calib_path.to_path_buf(),
+            msg: format!(
+                "ground-truth pose {i} is not finite (check the oxts records and calibration)"
+            ),
+        });
+    }
+    Ok(poses)
 }
 
 #[cfg(test)]
