@@ -335,6 +335,30 @@ impl Tracker {
         self.stats = TrackerStats::default();
     }
 
+    /// A frame period passed without a usable frame (the sensor dropped it, or the caller
+    /// rejected it as corrupt): advances the constant-velocity prediction by one period, so the
+    /// next frame is searched where the camera should be by then. The map is kept; without a
+    /// motion estimate this does nothing. Allocation-free, like [`Tracker::process`].
+    pub fn coast(&mut self) {
+        if self.has_velocity {
+            self.t_cw = renormalize(&self.velocity.compose(&self.t_cw));
+        }
+    }
+
+    /// Forgets the motion model but keeps the map (the time since the last frame is unknown,
+    /// e.g. after a timestamp jump): the next frame is predicted at the last pose, and if the
+    /// search fails there the tracker re-initialises as on any loss.
+    pub fn forget_motion(&mut self) {
+        self.velocity = Se3::identity();
+        self.has_velocity = false;
+    }
+
+    /// The current pose estimate, camera to world (the last frame's, or the coasted
+    /// prediction after [`Tracker::coast`]).
+    pub fn pose_wc(&self) -> Se3 {
+        self.t_cw.inverse()
+    }
+
     /// The camera.
     pub fn camera(&self) -> &StereoCamera {
         &self.cam
@@ -1237,6 +1261,34 @@ mod tests {
             assert!(max_err < 0.05, "max position error {max_err} m over 40 m");
             // Unique descriptors: EM keeps the nearest neighbour almost always.
             assert!(changed < 40, "{changed} associations changed");
+        });
+    }
+
+    #[test]
+    fn coasting_bridges_skipped_frames() {
+        run_on_big_stack(|| {
+            let mut rng = Rng(0xdead_beef_cafe_f00d);
+            let pts = world(&mut rng);
+            let mut tracker =
+                Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+            tracker.coast();
+            assert_eq!(tracker.pose_wc().trans.norm(), 0.0, "no motion model yet: no-op");
+            for k in 0..24 {
+                let gt = truth(k);
+                if k == 10 || k == 11 {
+                    // Frames the caller never saw: the prediction moves on without them.
+                    tracker.coast();
+                    assert!((tracker.pose_wc().trans - gt.trans).norm() < 0.05, "frame {k}");
+                    continue;
+                }
+                if k == 18 {
+                    tracker.forget_motion();
+                }
+                let frame = render(&pts, &gt, &mut rng);
+                let rep = tracker.process(&frame);
+                assert!(!rep.lost, "frame {k}: lost ({rep:?})");
+                assert!((rep.t_wc.trans - gt.trans).norm() < 0.05, "frame {k}");
+            }
         });
     }
 

@@ -17,6 +17,11 @@
 //! * [`report`] prints poses as `f64` bit patterns and hashes them (FNV-1a), the same text on
 //!   every target; [`report::run_embedded`] is the one driver all binaries call.
 //!
+//! * `sim` (feature `std`): the localiser as an ECU task on the host: fixed state built once,
+//!   a simulated 10 Hz sensor clock feeding a bounded frame ring, a per-frame deadline with a
+//!   degradation policy, seeded fault injection with detection and recovery, and the
+//!   `ecu-sim` binary.
+//!
 //! The binaries: `qemu_aarch64` (bare metal, `aarch64-unknown-none`, ARM semihosting under
 //! `qemu-system-aarch64 -M virt`), `host_poses` (x86-64, std) and `thumbv7em_size` (a
 //! Cortex-M7 link of the same code, for the section-size report). See `firmware-sim/README.md`.
@@ -27,11 +32,13 @@
 //! by-value move of that size is safe (a static slot on bare metal, a `Box` on a big-stack
 //! thread on the host): its constructor returns it by value, and on aarch64 the construction
 //! peaks at ≈ 36 MB of stack, while processing a frame needs ≈ 15 KB.
-#![cfg_attr(not(test), no_std)]
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 
 pub mod embedded;
 pub mod report;
+#[cfg(feature = "std")]
+pub mod sim;
 
 use semloc_core::assoc::Association;
 use semloc_core::frame::Frame;
@@ -380,16 +387,51 @@ impl Localiser {
         timestamp_s: f64,
         semantics: Option<&mut Semantics<'_>>,
     ) -> Result<FrameOutput, LocaliserError> {
+        let stereo = self.front_end(left, right, width, height, timestamp_s, semantics, true)?;
+        let report = self.track();
+        Ok(FrameOutput { report, stereo })
+    }
+
+    /// The front end of [`Self::process_raw`] without tracking: (labels,) ORB on both images
+    /// and stereo matching into the localiser's frame, whose stereo counters are returned.
+    /// [`Self::track`] then tracks that frame; a caller that finds the frame implausible (see
+    /// `sim::health`, std feature) can skip it instead and [`Self::coast`].
+    ///
+    /// With `relabel` false and `semantics` given, the network is not run: the labels and
+    /// weights of the last labelled frame are reused (the ECU simulation's degraded mode after
+    /// a deadline overrun).
+    ///
+    /// # Errors
+    /// As [`Self::process_raw`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn front_end(
+        &mut self,
+        left: &[u8],
+        right: &[u8],
+        width: usize,
+        height: usize,
+        timestamp_s: f64,
+        semantics: Option<&mut Semantics<'_>>,
+        relabel: bool,
+    ) -> Result<StereoStats, LocaliserError> {
         let l = ImageView::from_slice(left, width, height).map_err(LocaliserError::Image)?;
         let r = ImageView::from_slice(right, width, height).map_err(LocaliserError::Image)?;
         let Some(sem) = semantics else {
-            return self.process(&l, &r, timestamp_s);
+            self.right
+                .extract_weighted(&r, &NoWeights)
+                .map_err(|err| LocaliserError::Orb { right: true, err })?;
+            self.left
+                .extract_weighted(&l, &NoWeights)
+                .map_err(|err| LocaliserError::Orb { right: false, err })?;
+            return self.match_stereo(timestamp_s);
         };
         if (sem.width, sem.height) != (width, height) || left.len() != width * height {
             // The stage was built for another frame size (or the luma is strided).
             return Err(LocaliserError::Model(ModelError::BadIo));
         }
-        sem.label(left)?;
+        if relabel {
+            sem.label(left)?;
+        }
         let n = width * height;
         let labels = ImageView::from_slice(&sem.mem.labels[..n], width, height)
             .map_err(LocaliserError::Image)?;
@@ -403,8 +445,29 @@ impl Localiser {
             .map_err(|err| LocaliserError::Orb { right: false, err })?;
         let stereo = self.match_stereo(timestamp_s)?;
         semloc_core::assoc::annotate(&mut self.frame, &labels);
-        let report = self.tracker.process(&self.frame);
-        Ok(FrameOutput { report, stereo })
+        Ok(stereo)
+    }
+
+    /// Tracks the frame the last [`Self::front_end`] built.
+    pub fn track(&mut self) -> FrameReport {
+        self.tracker.process(&self.frame)
+    }
+
+    /// A frame period passed without a usable frame: the tracker advances its prediction by
+    /// one period ([`Tracker::coast`]).
+    pub fn coast(&mut self) {
+        self.tracker.coast();
+    }
+
+    /// The time since the last frame is unknown: the tracker forgets its motion model
+    /// ([`Tracker::forget_motion`]).
+    pub fn forget_motion(&mut self) {
+        self.tracker.forget_motion();
+    }
+
+    /// Features of the last frame the front end built (left key points).
+    pub fn frame_features(&self) -> usize {
+        self.frame.features.len()
     }
 
     fn match_stereo(&mut self, timestamp_s: f64) -> Result<StereoStats, LocaliserError> {
