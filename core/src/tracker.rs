@@ -791,24 +791,7 @@ impl Tracker {
     /// that end as outliers are dropped. Soft M-steps never reject a pair outright, so a few
     /// confidently wrong pairs would otherwise stay in the pose and in the keyframe.
     fn refine_decided(&mut self, feats: &[Feature]) {
-        self.pose_obs.clear();
-        for (j, f) in feats.iter().enumerate() {
-            let id = self.feat_lm[j];
-            if id == NO_LANDMARK {
-                continue;
-            }
-            let k = self.pose_obs.len();
-            let obs = PoseObs {
-                p_w: self.window.lm(id).p_w,
-                z: measurement(f),
-                weight: f64::from(self.feat_weight[j]),
-            };
-            if self.pose_obs.push(obs).is_err() {
-                break;
-            }
-            self.pose_feat[k] = j as u16;
-        }
-        let m = self.pose_obs.len();
+        let m = self.collect_matches(feats, true);
         self.outlier[..m].fill(false);
         optimize_pose(
             &self.cam,
@@ -843,25 +826,31 @@ impl Tracker {
         cells.iter().filter(|&&c| c).count() as u32
     }
 
-    /// Motion-only optimisation against the current matches; returns the inlier count. With
-    /// `classify`, matches are first split into inliers and outliers at the current pose
-    /// (after RANSAC) instead of all starting as inliers.
-    fn optimise(&mut self, feats: &[Feature], classify: bool) -> u32 {
+    /// Fills the pose problem with every feature's current match (`feat_lm`), weight 1 or,
+    /// with `em_weights`, the EM weight of the kept association; returns how many.
+    fn collect_matches(&mut self, feats: &[Feature], em_weights: bool) -> usize {
         self.pose_obs.clear();
-        for (i, f) in feats.iter().enumerate() {
-            let id = self.feat_lm[i];
+        for (j, f) in feats.iter().enumerate() {
+            let id = self.feat_lm[j];
             if id == NO_LANDMARK {
                 continue;
             }
             let k = self.pose_obs.len();
-            let _ = self.pose_obs.push(PoseObs {
-                p_w: self.window.lm(id).p_w,
-                z: measurement(f),
-                weight: 1.0,
-            });
-            self.pose_feat[k] = i as u16;
+            let weight = if em_weights { f64::from(self.feat_weight[j]) } else { 1.0 };
+            let obs = PoseObs { p_w: self.window.lm(id).p_w, z: measurement(f), weight };
+            if self.pose_obs.push(obs).is_err() {
+                break;
+            }
+            self.pose_feat[k] = j as u16;
         }
-        let n = self.pose_obs.len();
+        self.pose_obs.len()
+    }
+
+    /// Motion-only optimisation against the current matches; returns the inlier count. With
+    /// `classify`, matches are first split into inliers and outliers at the current pose
+    /// (after RANSAC) instead of all starting as inliers.
+    fn optimise(&mut self, feats: &[Feature], classify: bool) -> u32 {
+        let n = self.collect_matches(feats, false);
         self.outlier[..n].fill(false);
         if classify {
             let t = self.t_cw;
