@@ -27,6 +27,11 @@ fn allocations() -> u64 {
 /// A deterministic run: a budget no frame reaches, so no overrun changes the schedule.
 fn cfg(faults: &str) -> SimConfig {
     SimConfig {
+        // The simulated clock advances by wall time × cpu_scale. Tests of detection and
+        // recovery must not depend on how loaded the test machine is (a slow frame would make
+        // the next ones wait in the ring and be dropped by the catch-up), so a frame costs a
+        // thousandth of its wall time here; the deadline tests set their own scale and budget.
+        cpu_scale: 1e-3,
         budget_s: 1000.0,
         faults: faults.parse().expect("fault spec"),
         seed: 1,
