@@ -1,0 +1,171 @@
+//! The localiser's contracts: one-thread and split schedules give the same bits, sizes and
+//! missing labels are typed errors, labels are reused until replaced.
+
+extern crate std;
+
+use std::boxed::Box;
+use std::vec::Vec;
+
+use super::*;
+use crate::seg::WeightScheme;
+
+const W: usize = 320;
+const H: usize = 96;
+
+fn cam() -> StereoCamera {
+    StereoCamera::new(180.0, 180.0, 160.0, 48.0, 0.54).unwrap()
+}
+
+/// A textured pair: the right image is the left shifted by a disparity that grows downwards,
+/// so the stereo matcher finds depths; frame `k` moves the texture by `k` px (forward motion
+/// is not needed for these contracts).
+fn pair(k: usize) -> (Vec<u8>, Vec<u8>) {
+    // Random 4x4 blocks (a splitmix hash of the block index): corners everywhere, distinctive
+    // descriptors.
+    let tex = |x: usize, y: usize| {
+        let mut z = ((x / 4) as u64) << 32 | (y / 4) as u64;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        (z ^ (z >> 31)) as u8
+    };
+    let d = |y: usize| 6 + y / 16;
+    // A scene point at texture column u is at x = u + d in the left image, u in the right.
+    let left = (0..W * H).map(|i| tex(i % W + 64 - d(i / W) + k, i / W)).collect();
+    let right = (0..W * H).map(|i| tex(i % W + 64 + k, i / W)).collect();
+    (left, right)
+}
+
+/// Labels: a "car" (class 8) block in the middle, "building" (1) elsewhere.
+fn labels() -> Vec<u8> {
+    (0..W * H).map(|i| if (100..200).contains(&(i % W)) { 8 } else { 1 }).collect()
+}
+
+fn localiser(semantics: Option<WeightScheme>) -> Box<Localiser> {
+    let mut c = LocaliserConfig::new(cam(), W as u32, H as u32);
+    c.semantics = semantics;
+    Box::new(Localiser::new(&c).unwrap())
+}
+
+fn on_big_stack<F: FnOnce() + Send + 'static>(f: F) {
+    std::thread::Builder::new().stack_size(256 << 20).spawn(f).unwrap().join().unwrap();
+}
+
+#[test]
+fn split_extraction_equals_one_thread() {
+    on_big_stack(|| {
+        let lab = labels();
+        let lv = ImageView::from_slice(&lab, W, H).unwrap();
+        let mut a = localiser(Some(WeightScheme::Full));
+        let mut b = localiser(Some(WeightScheme::Full));
+        for k in 0..4 {
+            let (l, r) = pair(k);
+            let (l, r) = (
+                ImageView::from_slice(&l, W, H).unwrap(),
+                ImageView::from_slice(&r, W, H).unwrap(),
+            );
+            a.set_labels(&lv).unwrap();
+            let oa = a.process(&l, &r, k as f64 * 0.1).unwrap();
+            b.set_labels(&lv).unwrap();
+            {
+                let (mut le, mut re) = b.extractors_mut();
+                std::thread::scope(|s| {
+                    let h = s.spawn(move || re.run(&r));
+                    le.run(&l).unwrap();
+                    h.join().unwrap().unwrap();
+                });
+            }
+            let stereo = b.match_stereo(k as f64 * 0.1).unwrap();
+            let rep = b.track();
+            assert_eq!(oa.stereo, stereo);
+            assert_eq!(oa.report.t_wc, rep.t_wc);
+            assert_eq!(oa.report.inliers, rep.inliers);
+            assert!(oa.culled > 0, "the car block must cull candidates");
+            assert_eq!(oa.culled, b.culled());
+        }
+        assert!(a.frame().features.iter().any(|f| f.class == 8) || a.culled() > 0);
+    });
+}
+
+#[test]
+fn wrong_sizes_and_missing_labels_are_typed_errors() {
+    on_big_stack(|| {
+        let mut loc = localiser(Some(WeightScheme::Cull));
+        let (l, r) = pair(0);
+        // semantics on, no labels yet
+        assert_eq!(loc.process_raw(&l, &r, 0.0, None), Err(LocaliserError::NoLabels));
+        // labels of another size
+        let small = std::vec![1u8; 10 * 10];
+        let sv = ImageView::from_slice(&small, 10, 10).unwrap();
+        assert_eq!(
+            loc.set_labels(&sv),
+            Err(LocaliserError::FrameSize { expected: (W, H), got: (10, 10) })
+        );
+        // an image of another size
+        let lab = labels();
+        loc.set_labels(&ImageView::from_slice(&lab, W, H).unwrap()).unwrap();
+        let lv = ImageView::from_slice(&l, W, H).unwrap();
+        let half = ImageView::from_slice(&r, W / 2, H).unwrap();
+        assert!(matches!(loc.process(&lv, &half, 0.0), Err(LocaliserError::FrameSize { .. })));
+        // a short buffer
+        assert!(matches!(loc.process_raw(&l[..100], &r, 0.0, None), Err(LocaliserError::Image(_))));
+        // beyond capacity
+        let c = LocaliserConfig::new(cam(), 4000, 100);
+        assert!(matches!(Localiser::new(&c), Err(LocaliserError::FrameSize { .. })));
+    });
+}
+
+#[test]
+fn labels_are_reused_until_replaced() {
+    on_big_stack(|| {
+        let lab = labels();
+        let lv = ImageView::from_slice(&lab, W, H).unwrap();
+        let mut a = localiser(Some(WeightScheme::Full));
+        let mut b = localiser(Some(WeightScheme::Full));
+        let (l, r) = pair(0);
+        a.set_labels(&lv).unwrap();
+        b.set_labels(&lv).unwrap();
+        a.process_raw(&l, &r, 0.0, None).unwrap();
+        b.process_raw(&l, &r, 0.0, None).unwrap();
+        let (l, r) = pair(1);
+        a.set_labels(&lv).unwrap(); // the same labels again
+        let oa = a.process_raw(&l, &r, 0.1, None).unwrap();
+        let ob = b.process_raw(&l, &r, 0.1, None).unwrap(); // reused
+        assert_eq!(oa, ob);
+        assert_eq!(b.labels(), Some(&lab[..]));
+    });
+}
+
+#[test]
+fn without_semantics_labels_do_not_change_the_result() {
+    on_big_stack(|| {
+        let lab = labels();
+        let mut a = localiser(None);
+        let mut b = localiser(None);
+        let (l, r) = pair(0);
+        a.set_labels(&ImageView::from_slice(&lab, W, H).unwrap()).unwrap();
+        let oa = a.process_raw(&l, &r, 0.0, None).unwrap();
+        let ob = b.process_raw(&l, &r, 0.0, None).unwrap();
+        assert_eq!(oa, ob);
+        assert_eq!(oa.culled, 0);
+        assert!(oa.stereo.matched > 50, "the test pair must give stereo points: {:?}", oa.stereo);
+    });
+}
+
+#[test]
+fn localiser_fits_its_budget() {
+    // Printed for the README's figures.
+    std::println!(
+        "Localiser::MEMORY_BYTES = {} (budget {})",
+        Localiser::MEMORY_BYTES,
+        LOCALISER_BUDGET_BYTES
+    );
+    // The state is the core pieces and the two frame images, nothing else (up to padding).
+    use core::mem::size_of;
+    let parts = 2 * size_of::<KittiOrbExtractor>()
+        + size_of::<KittiStereoMatcher>()
+        + size_of::<Frame>()
+        + size_of::<Tracker>()
+        + 2 * MAX_PIXELS;
+    let total = core::hint::black_box(Localiser::MEMORY_BYTES);
+    assert!(total >= parts && total - parts < 512, "{total} vs {parts}");
+}
