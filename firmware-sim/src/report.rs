@@ -18,7 +18,7 @@ use semloc_core::math;
 use semloc_core::tracker::TrackState;
 
 use crate::embedded::{EmbeddedFrame, HEIGHT, WIDTH};
-use crate::{FrameOutput, Localiser, LocaliserError, Semantics};
+use crate::{FrameOutput, Localiser, LocaliserError, Network};
 
 /// FNV-1a, 64 bit: a hash with no tables and no platform dependence.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -236,7 +236,7 @@ pub fn write_labels_comment<W: Write + ?Sized>(
 pub fn run_frames<W, H>(
     loc: &mut Localiser,
     frames: &[EmbeddedFrame],
-    mut semantics: Option<&mut Semantics<'_>>,
+    mut network: Option<&mut Network<'_>>,
     out: &mut W,
     mut after_frame: H,
 ) -> Result<RunSummary, RunError>
@@ -245,15 +245,15 @@ where
     H: FnMut(&mut W, usize) -> fmt::Result,
 {
     write!(out, "# semloc firmware-sim: {} frames {WIDTH}x{HEIGHT}, ", frames.len())?;
-    match semantics.as_deref() {
-        None => writeln!(out, "ORB + stereo + tracker, semantics off")?,
-        Some(s) => writeln!(
+    match (network.is_some(), loc.config().semantics) {
+        (true, Some(scheme)) => writeln!(
             out,
             "int8 network {} + semantic ORB ({:?} weights) + stereo + tracker ({:?} association)",
             crate::embedded::MODEL_NAME,
-            s.scheme(),
-            loc.tracker_params().association,
+            scheme,
+            loc.config().tracker.association,
         )?,
+        _ => writeln!(out, "ORB + stereo + tracker, semantics off")?,
     }
     let mut hash = Fnv1a::new();
     let mut s = RunSummary {
@@ -269,10 +269,10 @@ where
     let (mut first, mut gt_first) = ([0.0; 12], [0.0; 12]);
     for (i, f) in frames.iter().enumerate() {
         let o = loc
-            .process_raw(f.left, f.right, WIDTH, HEIGHT, f.timestamp_s, semantics.as_deref_mut())
+            .process_raw(f.left, f.right, f.timestamp_s, network.as_deref_mut())
             .map_err(|err| RunError::Frame { frame: i, err })?;
-        if let Some(s) = semantics.as_deref() {
-            write_labels_comment(out, i, s.labels())?;
+        if let (true, Some(labels)) = (network.is_some(), loc.labels()) {
+            write_labels_comment(out, i, labels)?;
         }
         let row = pose_row(&o.report.t_wc);
         if i == 0 {
@@ -317,7 +317,7 @@ where
 /// As [`run_frames`].
 pub fn run_embedded<W, H>(
     loc: &mut Localiser,
-    semantics: Option<&mut Semantics<'_>>,
+    network: Option<&mut Network<'_>>,
     out: &mut W,
     after_frame: H,
 ) -> Result<RunSummary, RunError>
@@ -325,5 +325,5 @@ where
     W: Write + ?Sized,
     H: FnMut(&mut W, usize) -> fmt::Result,
 {
-    run_frames(loc, &crate::embedded::FRAMES, semantics, out, after_frame)
+    run_frames(loc, &crate::embedded::FRAMES, network, out, after_frame)
 }

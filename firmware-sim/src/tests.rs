@@ -5,7 +5,6 @@ use std::string::String;
 
 use crate::embedded::{self, CAMERA, FRAMES, HEIGHT, WIDTH};
 use crate::report::{self, pose_error, write_pose_line, Fnv1a, RunSummary};
-use crate::Localiser;
 
 /// Stack for threads that build the ≈ 10 MiB localiser.
 const BIG_STACK_BYTES: usize = 64 << 20;
@@ -22,8 +21,9 @@ fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T 
 /// The whole report text and summary of one run over the embedded frames.
 fn run_once() -> (String, RunSummary) {
     on_big_stack(|| {
-        let mut loc =
-            Box::new(Localiser::new_embedded(crate::geometric_params()).expect("localiser"));
+        let mut loc = Box::new(
+            crate::embedded_localiser(crate::geometric_params(), None).expect("localiser"),
+        );
         let mut text = String::new();
         let s = report::run_embedded(&mut loc, None, &mut text, |_, _| Ok(())).expect("run");
         (text, s)
@@ -99,26 +99,6 @@ fn embedded_data_is_consistent() {
 }
 
 #[test]
-fn localiser_fits_its_budget() {
-    // Two extractors, matcher, frame and tracker; printed for the README's figures.
-    println!(
-        "Localiser::MEMORY_BYTES = {} (budget {})",
-        Localiser::MEMORY_BYTES,
-        crate::LOCALISER_BUDGET_BYTES
-    );
-    // The state is the core pieces and nothing else (up to padding).
-    use core::mem::size_of;
-    use semloc_core::tracker::Tracker;
-    use semloc_core::{frame::Frame, orb::KittiOrbExtractor, stereo::KittiStereoMatcher};
-    let parts = 2 * size_of::<KittiOrbExtractor>()
-        + size_of::<KittiStereoMatcher>()
-        + size_of::<Frame>()
-        + size_of::<Tracker>();
-    let total = core::hint::black_box(Localiser::MEMORY_BYTES);
-    assert!(total >= parts && total - parts < 256, "{total} vs {parts}");
-}
-
-#[test]
 fn tracks_the_embedded_sequence_deterministically() {
     let (a, sa) = run_once();
     print!("{a}");
@@ -140,16 +120,13 @@ fn tracks_the_embedded_sequence_deterministically() {
 /// The semantic run (network, semantic ORB, EM): text and summary.
 fn run_semantic() -> (String, RunSummary) {
     on_big_stack(|| {
-        let mut loc = Box::new(Localiser::new_embedded(crate::semantic_params()).expect("loc"));
+        let mut loc = Box::new(
+            crate::embedded_localiser(crate::semantic_params(), Some(crate::SEMANTIC_SCHEME))
+                .expect("loc"),
+        );
         let mut storage = Box::new(crate::SegStorage::new());
-        let mut sem = crate::Semantics::new(
-            embedded::MODEL_BLOB,
-            WIDTH,
-            HEIGHT,
-            crate::SEMANTIC_SCHEME,
-            storage.memory(),
-        )
-        .expect("semantics");
+        let mut sem = crate::Network::new(embedded::MODEL_BLOB, WIDTH, HEIGHT, storage.memory())
+            .expect("network");
         let mut text = String::new();
         let s =
             report::run_embedded(&mut loc, Some(&mut sem), &mut text, |_, _| Ok(())).expect("run");
@@ -182,20 +159,9 @@ fn semantic_run_tracks_deterministically_and_labels_frames() {
 #[test]
 fn semantics_refuses_small_buffers() {
     let mut arena = vec![0i8; 1000];
-    let (mut i, mut m, mut l, mut w) = (
-        vec![0u8; WIDTH * HEIGHT],
-        vec![0u8; WIDTH * HEIGHT],
-        vec![0u8; WIDTH * HEIGHT],
-        vec![0u8; 10],
-    );
-    let mem = crate::SegMemory {
-        arena: &mut arena,
-        input: &mut i,
-        model_labels: &mut m,
-        labels: &mut l,
-        weights: &mut w,
-    };
-    let r = crate::Semantics::new(embedded::MODEL_BLOB, WIDTH, HEIGHT, crate::SEMANTIC_SCHEME, mem);
+    let (mut i, mut m) = (vec![0u8; WIDTH * HEIGHT], vec![0u8; WIDTH * HEIGHT]);
+    let mem = crate::NetworkMemory { arena: &mut arena, input: &mut i, model_labels: &mut m };
+    let r = crate::Network::new(embedded::MODEL_BLOB, WIDTH, HEIGHT, mem);
     assert!(
         matches!(
             r,
@@ -209,10 +175,11 @@ fn semantics_refuses_small_buffers() {
 #[test]
 fn wrong_buffer_size_is_an_error_not_a_panic() {
     on_big_stack(|| {
-        let mut loc =
-            Box::new(Localiser::new_embedded(crate::geometric_params()).expect("localiser"));
+        let mut loc = Box::new(
+            crate::embedded_localiser(crate::geometric_params(), None).expect("localiser"),
+        );
         let short = vec![0u8; 100];
-        let r = loc.process_raw(&short, &short, WIDTH, HEIGHT, 0.0, None);
+        let r = loc.process_raw(&short, &short, 0.0, None);
         assert!(matches!(r, Err(crate::LocaliserError::Image(_))), "{r:?}");
     });
 }
@@ -220,7 +187,7 @@ fn wrong_buffer_size_is_an_error_not_a_panic() {
 #[test]
 fn segmentation_memory_figures() {
     let m = semloc_core::nn::model::Model::parse(embedded::MODEL_BLOB).expect("model");
-    let need = crate::SegMemory::bytes_needed(&m, WIDTH, HEIGHT);
-    println!("model {} bytes, arena/map/frame {need:?}", embedded::MODEL_BLOB.len());
+    let need = crate::NetworkMemory::bytes_needed(&m);
+    println!("model {} bytes, arena/map {need:?}", embedded::MODEL_BLOB.len());
     assert_eq!(m.input_size(), (HEIGHT, WIDTH));
 }

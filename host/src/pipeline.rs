@@ -1,24 +1,25 @@
-//! The per-frame pipeline on the host: images → ORB (left ∥ right on two threads) → stereo
-//! matching → tracker, with per-stage timings.
+//! The host's schedule of core's one frame path ([`Localiser`]): frames are loaded (PNG
+//! decoding), labelled by the int8 network one frame ahead, and the two ORB extractions run on
+//! two threads; the pipeline itself is core's, so the poses are the same bits as on the ECU.
 //!
-//! All working memory is core's fixed-size state, created once: two ORB extractors, the stereo
-//! matcher, one [`Frame`] and the [`Tracker`] (together ≈ 11 MiB, see
-//! [`Pipeline::memory_bytes`]). These are far larger than a default thread stack, so
-//! [`Pipeline::new`] builds them on a temporary thread with a big stack and hands back boxes.
+//! All working memory is core's fixed-size [`Localiser`] (≈ 11 MiB, see
+//! [`Pipeline::memory_bytes`]), created once; it is far larger than a default thread stack, so
+//! [`Pipeline::new`] builds it on a temporary thread with a big stack and hands back a box.
 //! After that, processing a frame allocates nothing in core; the host's only per-frame
-//! allocations are image decoding and the scoped worker thread.
+//! allocations are image decoding, the network's label image and the scoped worker threads.
 
 use std::time::Instant;
 
 use image::GrayImage;
-use semloc_core::frame::Frame;
 use semloc_core::image::ImageView;
-use semloc_core::image::ImageViewMut;
+use semloc_core::localiser::{
+    LeftExtraction, Localiser, LocaliserConfig, LocaliserError, RightExtraction,
+};
 use semloc_core::nn::graph::Kernels;
-use semloc_core::orb::{KittiOrbExtractor, NoWeights, OrbConfig, OrbError};
-use semloc_core::seg::{weight_image, WeightScheme};
-use semloc_core::stereo::{KittiStereoMatcher, StereoError, StereoParams, StereoStats};
-use semloc_core::tracker::{FrameReport, Tracker, TrackerError, TrackerParams};
+use semloc_core::orb::KittiOrbExtractor;
+use semloc_core::seg::WeightScheme;
+use semloc_core::stereo::StereoStats;
+use semloc_core::tracker::{FrameReport, Tracker, TrackerParams};
 
 use std::borrow::Cow;
 
@@ -117,26 +118,16 @@ pub enum PipelineError {
     /// The calibration does not describe a usable camera.
     #[error("calibration unusable: {0}")]
     Calib(String),
-    /// The tracker refused the configuration.
-    #[error("tracker: {0}")]
-    Tracker(#[from] TrackerError),
-    /// ORB extraction failed (image larger than the extractor's capacity, …).
-    #[error("ORB extraction on frame {frame} ({side} image): {err}")]
-    Orb {
-        /// Frame index.
-        frame: usize,
-        /// `left` or `right`.
-        side: &'static str,
-        /// The core error.
-        err: OrbError,
-    },
-    /// Stereo matching failed.
-    #[error("stereo matching on frame {frame}: {err}")]
-    Stereo {
+    /// Core refused the configuration (camera, image size, settings).
+    #[error("localiser: {0}")]
+    Config(LocaliserError),
+    /// Core's frame path failed on a frame (ORB, stereo matching, labels, image size).
+    #[error("frame {frame}: {err}")]
+    Frame {
         /// Frame index.
         frame: usize,
         /// The core error.
-        err: StereoError,
+        err: LocaliserError,
     },
     /// The segmentation network failed on a frame.
     #[error("segmentation of frame {frame}: {err}")]
@@ -267,21 +258,14 @@ impl CategoryCounts {
     }
 }
 
-/// Core state for one stereo sequence.
+/// Core's frame path for one stereo sequence, with the host's loading, labelling and thread
+/// schedule around it.
 pub struct Pipeline {
-    left: Box<KittiOrbExtractor>,
-    right: Box<KittiOrbExtractor>,
-    stereo: Box<KittiStereoMatcher>,
-    frame: Box<Frame>,
-    tracker: Box<Tracker>,
-    params: StereoParams,
+    loc: Box<Localiser>,
     /// Worker threads: 1 runs everything on the caller's thread, 2 extracts left and right
-    /// in parallel (the deployment setting: the machine has two cores).
+    /// in parallel and labels the next frame while this one is tracked (the deployment
+    /// setting: the machine has two cores).
     threads: usize,
-    /// Semantic weighting of left-image features, if on.
-    semantics: Option<WeightScheme>,
-    /// Weight image buffer (host side; reused every frame).
-    weights: Vec<u8>,
     /// The network that labels left frames when semantics are on (else the dataset's labels).
     segmenter: Option<Segmenter>,
     /// The next frame's left image and labels, made while this frame was tracked.
@@ -310,60 +294,30 @@ impl Pipeline {
         threads: usize,
     ) -> Result<Self, PipelineError> {
         let cam = calib.to_camera().map_err(|e| PipelineError::Calib(e.to_string()))?;
-        let params = StereoParams::new((cam.fx_px * cam.baseline_m) as f32, cam.baseline_m as f32);
-        // Construct the multi-MiB structs where a big stack makes the by-value moves safe.
-        let built = std::thread::Builder::new()
+        let config =
+            LocaliserConfig { tracker: tracker_params, ..LocaliserConfig::new(cam, width, height) };
+        // Construct the multi-MiB state where a big stack makes the by-value move safe.
+        let loc = std::thread::Builder::new()
             .stack_size(BIG_STACK_BYTES)
-            .spawn(move || -> Result<_, PipelineError> {
-                let mut left = Box::new(KittiOrbExtractor::new());
-                let mut right = Box::new(KittiOrbExtractor::new());
-                left.configure(OrbConfig::KITTI).map_err(|err| PipelineError::Orb {
-                    frame: 0,
-                    side: "left",
-                    err,
-                })?;
-                right.configure(OrbConfig::KITTI).map_err(|err| PipelineError::Orb {
-                    frame: 0,
-                    side: "right",
-                    err,
-                })?;
-                let stereo = Box::new(KittiStereoMatcher::new());
-                let frame = Box::new(Frame::new());
-                let tracker = Box::new(Tracker::new(cam, width, height, tracker_params)?);
-                Ok((left, right, stereo, frame, tracker))
-            })
+            .spawn(move || Localiser::new(&config).map(Box::new))
             .map_err(|e| PipelineError::Worker(e.to_string()))?
             .join()
-            .map_err(|_| PipelineError::Worker("constructor thread panicked".into()))??;
-        let (left, right, stereo, frame, tracker) = built;
-        Ok(Self {
-            left,
-            right,
-            stereo,
-            frame,
-            tracker,
-            params,
-            threads: threads.clamp(1, 2),
-            semantics: None,
-            weights: Vec::new(),
-            segmenter: None,
-            prefetched: None,
-        })
+            .map_err(|_| PipelineError::Worker("constructor thread panicked".into()))?
+            .map_err(PipelineError::Config)?;
+        Ok(Self { loc, threads: threads.clamp(1, 2), segmenter: None, prefetched: None })
     }
 
-    /// Bytes of core state this pipeline holds (extractors, matcher, frame, tracker).
+    /// Bytes of core state this pipeline holds (the whole [`Localiser`]).
     pub fn memory_bytes() -> usize {
-        2 * core::mem::size_of::<KittiOrbExtractor>()
-            + core::mem::size_of::<KittiStereoMatcher>()
-            + core::mem::size_of::<Frame>()
-            + core::mem::size_of::<Tracker>()
+        Localiser::MEMORY_BYTES
     }
 
     /// Weights left-image features by semantic class; `None` turns it off. Labels come from
     /// the network set with [`Pipeline::set_segmenter`], else from the sequence's `semantic/`
     /// folder (see [`Sequence::load_labels`]).
     pub fn set_semantics(&mut self, scheme: Option<WeightScheme>) {
-        self.semantics = scheme;
+        // Labels are checked when set, so rebuilding their weights cannot fail.
+        let _ = self.loc.set_semantics(scheme);
     }
 
     /// Labels left frames with the int8 network (pipelined on the second thread). The
@@ -380,7 +334,12 @@ impl Pipeline {
 
     /// The tracker (for counters and the window).
     pub fn tracker(&self) -> &Tracker {
-        &self.tracker
+        self.loc.tracker()
+    }
+
+    /// Core's localiser.
+    pub fn localiser(&self) -> &Localiser {
+        &self.loc
     }
 
     /// Loads frame `i` of `seq` and processes it.
@@ -424,7 +383,7 @@ impl Pipeline {
     ) -> Result<FrameOutput, PipelineError> {
         let t0 = Instant::now();
         let ts = src.timestamp_s(i);
-        let scheme = self.semantics;
+        let scheme = self.loc.config().semantics;
         let use_net = scheme.is_some() && self.segmenter.is_some();
         // Frame i's left image and labels: prefetched by the previous frame, or made now.
         let prefetched = self.prefetched.take().filter(|p| p.index == i);
@@ -451,22 +410,38 @@ impl Pipeline {
             None => (None, None),
         };
         let next = (use_net && i + 1 < src.len()).then_some(i + 1);
-        let threads = self.threads;
-        let Pipeline { left, right, stereo, frame, tracker, params, segmenter, weights, .. } = self;
-        let (left_ex, right_ex, seg) = (&mut **left, &mut **right, segmenter.as_mut());
-        let (stereo, frame, tracker, params) =
-            (&mut **stereo, &mut **frame, &mut **tracker, &*params);
+        let core_err = |err| PipelineError::Frame { frame: i, err };
 
         // The right image: load and extract (the second thread's first job).
-        let right_work = |ex: &mut KittiOrbExtractor| -> Result<(f64, f64), PipelineError> {
+        let right_work = |ex: &mut RightExtraction<'_>| -> Result<(f64, f64), PipelineError> {
             let t = Instant::now();
             let img = src.right(i)?;
             let load = ms(t);
             let t = Instant::now();
-            extract(ex, &img, i, "right")?;
+            view(&img).and_then(|v| ex.run(&v)).map_err(core_err)?;
             Ok((load, ms(t)))
         };
-        // The next frame's labels (the second thread's second job).
+        // This thread: the left image and its labels, weighted ORB.
+        let left_work = |ex: &mut LeftExtraction<'_>| -> Result<(f64, f64), PipelineError> {
+            let t = Instant::now();
+            let img = match left_img {
+                Some(img) => img,
+                None => src.left(i)?.into_owned(),
+            };
+            let labels = match (scheme, labels) {
+                (Some(_), Some(l)) => Some(l),
+                (Some(_), None) => Some(src.labels(i)?.into_owned()),
+                (None, _) => None,
+            };
+            let load = ms(t);
+            let t = Instant::now();
+            if let Some(l) = &labels {
+                view(l).and_then(|v| ex.set_labels(&v)).map_err(core_err)?;
+            }
+            view(&img).and_then(|v| ex.run(&v)).map_err(core_err)?;
+            Ok((load, ms(t)))
+        };
+        // The next frame's labels (the second thread's job while this frame is tracked).
         let seg_work = |seg: Option<&mut Segmenter>| -> Result<Option<Prefetch>, PipelineError> {
             let (Some(j), Some(seg)) = (next, seg) else { return Ok(None) };
             let t = Instant::now();
@@ -476,83 +451,47 @@ impl Pipeline {
             let labels = segment(seg, &img, j)?;
             Ok(Some(Prefetch { index: j, left: img, labels, seg_ms: ms(t), load_ms }))
         };
-        // This thread: left image, weighted ORB; then (with the right features) stereo + track.
-        let left_work =
-            |ex: &mut KittiOrbExtractor,
-             weights: &mut Vec<u8>|
-             -> Result<(GrayImage, Option<GrayImage>, f64, f64), PipelineError> {
-                let t = Instant::now();
-                let img = match left_img {
-                    Some(img) => img,
-                    None => src.left(i)?.into_owned(),
-                };
-                let labels = match (scheme, labels) {
-                    (Some(_), Some(l)) => Some(l),
-                    (Some(_), None) => Some(src.labels(i)?.into_owned()),
-                    (None, _) => None,
-                };
-                let load = ms(t);
-                let t = Instant::now();
-                match (scheme, labels.as_ref()) {
-                    (Some(scheme), Some(l)) => extract_weighted(ex, &img, l, scheme, weights, i)?,
-                    _ => extract(ex, &img, i, "left")?,
-                }
-                Ok((img, labels, load, ms(t)))
-            };
+        // Stereo matching + tracking (the same call in both schedules).
+        let track = |loc: &mut Localiser| -> Result<Tracked, PipelineError> {
+            let t = Instant::now();
+            let stereo = loc.match_stereo(ts).map_err(core_err)?;
+            let stereo_ms = ms(t);
+            let t = Instant::now();
+            let report = loc.track();
+            Ok(Tracked { stereo, stereo_ms, report, track_ms: ms(t) })
+        };
 
-        // Stereo + tracking once both extractions are done (the same call in both schedules).
-        let mut match_track =
-            |left: &KittiOrbExtractor, right: &KittiOrbExtractor, labels: Option<&GrayImage>| {
-                match_and_track(left, right, stereo, frame, tracker, params, labels, i, ts)
-            };
-
-        let (l, r, pre, track) = if threads >= 2 {
-            let (tx, rx) = std::sync::mpsc::sync_channel::<&KittiOrbExtractor>(1);
-            let scoped = std::thread::scope(|s| {
-                let h = s.spawn(move || {
-                    let r = right_work(right_ex);
-                    let r = match r {
-                        Ok(r) => r,
-                        Err(e) => return (Err(e), Ok(None)),
-                    };
-                    let shared: &KittiOrbExtractor = right_ex;
-                    // the receiver only disappears when this frame already failed
-                    let _ = tx.send(shared);
-                    (Ok(r), seg_work(seg))
-                });
-                let l = left_work(left_ex, weights);
-                let track = match (&l, rx.recv()) {
-                    (Ok((_, labels, _, _)), Ok(right_ex)) => {
-                        Some(match_track(left_ex, right_ex, labels.as_ref()))
-                    }
-                    _ => None,
-                };
-                let joined = h.join();
-                (l, joined, track)
+        let Pipeline { loc, segmenter, threads, .. } = self;
+        let (left, right, extract_done, tracked, pre) = if *threads >= 2 {
+            let (mut l_ex, mut r_ex) = loc.extractors_mut();
+            let (l, r) = std::thread::scope(|s| {
+                let h = s.spawn(move || right_work(&mut r_ex));
+                let l = left_work(&mut l_ex);
+                (l, h.join())
             });
-            let (l, joined, track) = scoped;
-            let (r, pre) =
-                joined.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))?;
-            (l, r, pre, track)
-        } else {
-            let r = right_work(right_ex);
-            let l = left_work(left_ex, weights);
-            let track = match (&l, &r) {
-                (Ok((_, labels, _, _)), Ok(_)) => {
-                    Some(match_track(left_ex, right_ex, labels.as_ref()))
-                }
-                _ => None,
-            };
+            let r = r.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))?;
+            let extract_done = Instant::now();
+            let (l, r) = (l?, r?);
+            let (tracked, pre) = std::thread::scope(|s| {
+                let seg = segmenter.as_mut();
+                let h = s.spawn(move || seg_work(seg));
+                let tracked = track(loc);
+                (tracked, h.join())
+            });
             let pre =
-                if track.as_ref().is_some_and(|t| t.is_ok()) { seg_work(seg) } else { Ok(None) };
-            (l, r, pre, track)
+                pre.map_err(|_| PipelineError::Worker("segmentation worker panicked".into()))?;
+            (l, r, extract_done, tracked, pre)
+        } else {
+            let (mut l_ex, mut r_ex) = loc.extractors_mut();
+            let r = right_work(&mut r_ex)?;
+            let l = left_work(&mut l_ex)?;
+            let extract_done = Instant::now();
+            let tracked = track(loc);
+            let pre = if tracked.is_ok() { seg_work(segmenter.as_mut()) } else { Ok(None) };
+            (l, r, extract_done, tracked, pre)
         };
-        let (_img, _labels, left_load_ms, orb_left_ms) = l?;
-        let (right_load_ms, orb_right_ms) = r?;
-        let (stereo_stats, stereo_ms, report, track_ms, extract_done_ms) = match track {
-            Some(t) => t?,
-            None => return Err(PipelineError::Worker("frame aborted".into())),
-        };
+        let ((left_load_ms, orb_left_ms), (right_load_ms, orb_right_ms)) = (left, right);
+        let tracked = tracked?;
         let pre = pre?;
         let next_load_ms = pre.as_ref().map_or(0.0, |p| p.load_ms);
         self.prefetched = pre;
@@ -562,15 +501,19 @@ impl Pipeline {
             load_ms,
             orb_left_ms,
             orb_right_ms,
-            extract_wall_ms: extract_done_ms
-                .map_or(0.0, |t| t.duration_since(t0).as_secs_f64() * 1e3),
-            stereo_ms,
-            track_ms,
+            extract_wall_ms: extract_done.duration_since(t0).as_secs_f64() * 1e3,
+            stereo_ms: tracked.stereo_ms,
+            track_ms: tracked.track_ms,
             seg_ms,
             total_ms,
             compute_ms: (total_ms - load_ms).max(0.0),
         };
-        Ok(FrameOutput { report, stereo: stereo_stats, times, culled: self.culled() })
+        Ok(FrameOutput {
+            report: tracked.report,
+            stereo: tracked.stereo,
+            times,
+            culled: self.loc.culled(),
+        })
     }
 
     /// Extracts frame `i`'s left ORB features twice, plain and with `scheme`'s semantic
@@ -598,60 +541,30 @@ impl Pipeline {
             }
             c
         };
-        extract(&mut self.left, &img, i, "left")?;
-        let plain = count(&self.left);
-        extract_weighted(&mut self.left, &img, &labels, scheme, &mut self.weights, i)?;
-        let weighted = count(&self.left);
-        Ok((plain, weighted))
-    }
-
-    /// Candidates the left extractor dropped for a zero weight on the last frame.
-    fn culled(&self) -> u32 {
-        self.left.features().stats().levels().iter().map(|l| l.weight_dropped).sum()
+        let core_err = |err| PipelineError::Frame { frame: i, err };
+        let kept = self.loc.config().semantics;
+        self.loc.set_semantics(Some(scheme)).map_err(core_err)?;
+        let (mut left, _) = self.loc.extractors_mut();
+        let mut counted = || -> Result<_, LocaliserError> {
+            let v = view(&img)?;
+            left.run_unweighted(&v)?;
+            let plain = count(left.extractor());
+            left.set_labels(&view(&labels)?)?;
+            left.run(&v)?;
+            Ok((plain, count(left.extractor())))
+        };
+        let counted = counted().map_err(core_err);
+        self.loc.set_semantics(kept).map_err(core_err)?;
+        counted
     }
 }
 
-/// Stereo matching, per-feature semantics for the EM association, and tracking of one frame.
-/// Returns the stereo counters, stereo ms, the tracker's report, track ms, and when the
-/// extraction had finished (this is called once both extractions are done).
-#[allow(clippy::too_many_arguments)]
-fn match_and_track(
-    left: &KittiOrbExtractor,
-    right: &KittiOrbExtractor,
-    stereo: &mut KittiStereoMatcher,
-    frame: &mut Frame,
-    tracker: &mut Tracker,
-    params: &StereoParams,
-    labels: Option<&GrayImage>,
-    index: usize,
-    timestamp_s: f64,
-) -> Result<(StereoStats, f64, FrameReport, f64, Option<Instant>), PipelineError> {
-    let t = Instant::now();
-    let stats = stereo
-        .match_frame(
-            left.features(),
-            left.pyramid(),
-            right.features(),
-            right.pyramid(),
-            params,
-            timestamp_s,
-            frame,
-        )
-        .map_err(|err| PipelineError::Stereo { frame: index, err })?;
-    if let Some(labels) = labels {
-        // Class and semantic descriptor per feature, for the EM association.
-        let (w, h) = (labels.width() as usize, labels.height() as usize);
-        let lv = ImageView::from_slice(labels.as_raw(), w, h).map_err(|e| PipelineError::Orb {
-            frame: index,
-            side: "left",
-            err: e.into(),
-        })?;
-        semloc_core::assoc::annotate(frame, &lv);
-    }
-    let stereo_ms = ms(t);
-    let t2 = Instant::now();
-    let report = tracker.process(frame);
-    Ok((stats, stereo_ms, report, ms(t2), Some(t)))
+/// Stereo matching and tracking of one frame, with their times.
+struct Tracked {
+    stereo: StereoStats,
+    stereo_ms: f64,
+    report: FrameReport,
+    track_ms: f64,
 }
 
 /// The network's labels of one left frame, as an image.
@@ -662,42 +575,10 @@ fn segment(seg: &mut Segmenter, img: &GrayImage, frame: usize) -> Result<GrayIma
         .ok_or_else(|| PipelineError::Worker(format!("frame {frame}: label image size")))
 }
 
-fn extract(
-    ex: &mut KittiOrbExtractor,
-    img: &GrayImage,
-    frame: usize,
-    side: &'static str,
-) -> Result<(), PipelineError> {
-    let view = ImageView::from_slice(img.as_raw(), img.width() as usize, img.height() as usize)
-        .map_err(|e| PipelineError::Orb { frame, side, err: e.into() })?;
-    ex.extract_weighted(&view, &NoWeights).map_err(|err| PipelineError::Orb {
-        frame,
-        side,
-        err,
-    })?;
-    Ok(())
-}
-
-/// ORB on `img` with the semantic weight image of `labels` (built in `buf`).
-fn extract_weighted(
-    ex: &mut KittiOrbExtractor,
-    img: &GrayImage,
-    labels: &GrayImage,
-    scheme: WeightScheme,
-    buf: &mut Vec<u8>,
-    frame: usize,
-) -> Result<(), PipelineError> {
-    let (w, h) = (labels.width() as usize, labels.height() as usize);
-    buf.resize(w * h, 0);
-    let orb = |err: OrbError| PipelineError::Orb { frame, side: "left", err };
-    let lv = ImageView::from_slice(labels.as_raw(), w, h).map_err(|e| orb(e.into()))?;
-    let mut wv = ImageViewMut::from_slice(buf, w, h).map_err(|e| orb(e.into()))?;
-    weight_image(&lv, scheme, &mut wv).map_err(|e| orb(e.into()))?;
-    let view = ImageView::from_slice(img.as_raw(), img.width() as usize, img.height() as usize)
-        .map_err(|e| orb(e.into()))?;
-    let weights = ImageView::from_slice(buf, w, h).map_err(|e| orb(e.into()))?;
-    ex.extract_weighted(&view, &weights).map_err(orb)?;
-    Ok(())
+/// A borrowed core view of a decoded luma image.
+fn view(img: &GrayImage) -> Result<ImageView<'_>, LocaliserError> {
+    ImageView::from_slice(img.as_raw(), img.width() as usize, img.height() as usize)
+        .map_err(LocaliserError::Image)
 }
 
 fn ms(t: Instant) -> f64 {

@@ -1,19 +1,20 @@
-//! Core allocates nothing per frame: ORB on both images, stereo matching and tracking run under
-//! a counting global allocator, and after the first frame the count must stay at zero.
+//! Core allocates nothing per frame: core's one frame path ([`Localiser`]) runs under a counting
+//! global allocator — the geometric backbone, and the paper's full path (the int8 network's
+//! labels, semantic ORB, semantic descriptors, EM association) — and after the first frame the
+//! count must stay at zero.
 //!
-//! The large fixed-size state is built (and boxed) before counting starts; only calls into
-//! `semloc-core` are inside the counted region. Both tests take one lock because the counter
-//! is process-wide.
+//! The large fixed-size state and the network's buffers are built before counting starts; only
+//! calls into `semloc-core` are inside the counted region. The tests take one lock because the
+//! counter is process-wide.
 
 use std::alloc::System;
 use std::sync::Mutex;
 
-use semloc_core::frame::Frame;
+use semloc_core::assoc::Association;
 use semloc_core::geom::StereoCamera;
-use semloc_core::image::ImageView;
-use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
-use semloc_core::stereo::{KittiStereoMatcher, StereoParams};
-use semloc_core::tracker::{Tracker, TrackerParams};
+use semloc_core::localiser::{Localiser, LocaliserConfig, Network, NetworkMemory};
+use semloc_core::seg::WeightScheme;
+use semloc_core::tracker::TrackerParams;
 use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 
 #[global_allocator]
@@ -21,65 +22,68 @@ static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
-struct Core {
-    left: Box<KittiOrbExtractor>,
-    right: Box<KittiOrbExtractor>,
-    stereo: Box<KittiStereoMatcher>,
-    frame: Box<Frame>,
-    tracker: Box<Tracker>,
-    params: StereoParams,
+/// The committed network the semantic path labels frames with.
+fn model_blob() -> semloc::nn::SlmBlob {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/artefacts/fastscnn_r2_192x640.slm");
+    semloc::nn::SlmBlob::load(&path).unwrap()
 }
 
-fn build(cam: StereoCamera, w: u32, h: u32) -> Core {
-    let mut left = Box::new(KittiOrbExtractor::new());
-    let mut right = Box::new(KittiOrbExtractor::new());
-    left.configure(OrbConfig::KITTI).unwrap();
-    right.configure(OrbConfig::KITTI).unwrap();
-    let params = StereoParams::new((cam.fx_px * cam.baseline_m) as f32, cam.baseline_m as f32);
-    Core {
-        left,
-        right,
-        stereo: Box::new(KittiStereoMatcher::new()),
-        frame: Box::new(Frame::new()),
-        tracker: Box::new(Tracker::new(cam, w, h, TrackerParams::default()).unwrap()),
-        params,
-    }
+/// Stereo frames (left, right luma) of one camera.
+struct Clip {
+    cam: StereoCamera,
+    frames: Vec<(Vec<u8>, Vec<u8>)>,
+    w: usize,
+    h: usize,
 }
 
-/// Runs the frames through core; returns (allocations, frames tracked) after the first frame.
-fn count_allocations(core: &mut Core, frames: &[(Vec<u8>, Vec<u8>)], w: usize, h: usize) -> usize {
-    let mut allocations = 0;
-    for (i, (l, r)) in frames.iter().enumerate() {
-        let lv = ImageView::from_slice(l, w, h).unwrap();
-        let rv = ImageView::from_slice(r, w, h).unwrap();
-        let region = Region::new(GLOBAL);
-        core.left.extract(&lv).unwrap();
-        core.right.extract(&rv).unwrap();
-        core.stereo
-            .match_frame(
-                core.left.features(),
-                core.left.pyramid(),
-                core.right.features(),
-                core.right.pyramid(),
-                &core.params,
-                i as f64 * 0.1,
-                &mut core.frame,
-            )
-            .unwrap();
-        let rep = core.tracker.process(&core.frame);
-        let change = region.change();
-        if i > 0 {
-            allocations += change.allocations + change.reallocations;
-        }
-        eprintln!(
-            "frame {i}: stereo {} inliers {} kf {} allocations {}",
-            core.frame.stereo_count(),
-            rep.inliers,
-            rep.keyframe,
-            change.allocations
+/// Runs the clip through a localiser (the paper's full path with network labels and EM when
+/// `semantic`); returns the heap allocations after the first frame.
+fn count_allocations(clip: Clip, semantic: bool) -> usize {
+    on_big_stack(move || {
+        let Clip { cam, frames, w, h } = clip;
+        let mut config = LocaliserConfig::new(cam, w as u32, h as u32);
+        let blob = model_blob();
+        let (arena_len, map_len) = NetworkMemory::bytes_needed(
+            &semloc_core::nn::model::Model::parse(blob.bytes()).unwrap(),
         );
-    }
-    allocations
+        let (mut arena, mut input, mut model_labels) =
+            (vec![0i8; arena_len], vec![0u8; map_len], vec![0u8; map_len]);
+        let mut network = semantic.then(|| {
+            let mem = NetworkMemory {
+                arena: &mut arena,
+                input: &mut input,
+                model_labels: &mut model_labels,
+            };
+            Network::new(blob.bytes(), w, h, mem).unwrap()
+        });
+        if semantic {
+            config.semantics = Some(WeightScheme::Full);
+            config.tracker = TrackerParams { association: Association::Em, ..config.tracker };
+        }
+        let mut loc = Box::new(Localiser::new(&config).unwrap());
+        let mut allocations = 0;
+        for (i, (l, r)) in frames.iter().enumerate() {
+            let region = Region::new(GLOBAL);
+            let out = loc.process_raw(l, r, i as f64 * 0.1, network.as_mut()).unwrap();
+            let change = region.change();
+            if i > 0 {
+                allocations += change.allocations + change.reallocations;
+            }
+            eprintln!(
+                "frame {i}: stereo {} inliers {} kf {} culled {} allocations {}",
+                out.stereo.matched,
+                out.report.inliers,
+                out.report.keyframe,
+                out.culled,
+                change.allocations
+            );
+            if semantic {
+                assert!(loc.labels().is_some(), "the network labelled frame {i}");
+            }
+        }
+        allocations
+    })
 }
 
 /// A textured synthetic stereo pair: blocks of pseudo-random grey with a per-row-band
@@ -106,24 +110,29 @@ fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T 
     std::thread::Builder::new().stack_size(64 << 20).spawn(f).unwrap().join().unwrap()
 }
 
+fn synthetic_frames() -> Clip {
+    let (w, h) = (1241usize, 376usize);
+    let frames: Vec<_> = (0..6).map(|k| synthetic_pair(w, h, k * 2)).collect();
+    let cam = StereoCamera::new(718.856, 718.856, 607.19, 185.22, 0.537).unwrap();
+    Clip { cam, frames, w, h }
+}
+
 #[test]
 fn core_allocates_nothing_per_frame_on_synthetic_frames() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let (w, h) = (1241usize, 376usize);
-    let frames: Vec<_> = (0..6).map(|k| synthetic_pair(w, h, k * 2)).collect();
-    let allocations = on_big_stack(move || {
-        let cam = StereoCamera::new(718.856, 718.856, 607.19, 185.22, 0.537).unwrap();
-        let mut core = build(cam, w as u32, h as u32);
-        count_allocations(&mut core, &frames, w, h)
-    });
+    let allocations = count_allocations(synthetic_frames(), false);
     assert_eq!(allocations, 0, "heap allocations in core after the first frame");
 }
 
 #[test]
-#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
-fn core_allocates_nothing_per_frame_on_kitti_raw() {
+fn semantic_em_path_allocates_nothing_per_frame_on_synthetic_frames() {
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let Some(data) = semloc_tests::shared_data() else { return };
+    let allocations = count_allocations(synthetic_frames(), true);
+    assert_eq!(allocations, 0, "heap allocations in the semantic + EM path after the first frame");
+}
+
+fn kitti_raw_frames() -> Option<Clip> {
+    let data = semloc_tests::shared_data()?;
     let seq = semloc::dataset::Sequence::open_raw(&data.join("kitti-raw"), "2011_09_26_0005", None)
         .unwrap();
     let (w, h) = (seq.image_size.0 as usize, seq.image_size.1 as usize);
@@ -133,12 +142,25 @@ fn core_allocates_nothing_per_frame_on_kitti_raw() {
             (l.into_raw(), r.into_raw())
         })
         .collect();
-    let cam = seq.calib.to_camera().unwrap();
-    let allocations = on_big_stack(move || {
-        let mut core = build(cam, w as u32, h as u32);
-        count_allocations(&mut core, &frames, w, h)
-    });
+    Some(Clip { cam: seq.calib.to_camera().unwrap(), frames, w, h })
+}
+
+#[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
+fn core_allocates_nothing_per_frame_on_kitti_raw() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(clip) = kitti_raw_frames() else { return };
+    let allocations = count_allocations(clip, false);
     assert_eq!(allocations, 0, "heap allocations in core after the first frame");
+}
+
+#[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
+fn semantic_em_path_allocates_nothing_per_frame_on_kitti_raw() {
+    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(clip) = kitti_raw_frames() else { return };
+    let allocations = count_allocations(clip, true);
+    assert_eq!(allocations, 0, "heap allocations in the semantic + EM path after the first frame");
 }
 
 /// The int8 network (the committed 192x640 model) labels KITTI-sized frames without a single
@@ -148,9 +170,7 @@ fn core_allocates_nothing_per_frame_on_kitti_raw() {
 fn segmentation_allocates_nothing() {
     use semloc_core::nn::graph::{segment_frame, Kernels, Letterbox, SegBuffers};
     let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../models/artefacts/fastscnn_r2_192x640.slm");
-    let blob = semloc::nn::SlmBlob::load(&path).unwrap();
+    let blob = model_blob();
     let (w, h) = (1241usize, 376usize);
     let frames: Vec<Vec<u8>> =
         (0..3).map(|k| (0..w * h).map(|i| ((i * 31 + k * 977) % 251) as u8).collect()).collect();

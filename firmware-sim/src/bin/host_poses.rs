@@ -14,7 +14,7 @@ use std::process::ExitCode;
 use semloc_firmware_sim::embedded::{HEIGHT, MODEL_BLOB, WIDTH};
 use semloc_firmware_sim::report::{self, RunError};
 use semloc_firmware_sim::{
-    geometric_params, semantic_params, Localiser, SegStorage, Semantics, SEMANTIC_SCHEME,
+    embedded_localiser, geometric_params, semantic_params, Network, SegStorage, SEMANTIC_SCHEME,
 };
 
 /// Stack for the thread that builds the ≈ 10 MiB localiser (a by-value return may sit on it).
@@ -23,12 +23,14 @@ const BIG_STACK_BYTES: usize = 64 << 20;
 /// Both runs; the text so far even on failure, and whether both tracked.
 fn run(text: &mut String) -> Result<bool, String> {
     let err = |e: RunError| e.to_string();
-    let mut loc = Box::new(Localiser::new_embedded(geometric_params()).map_err(|e| e.to_string())?);
+    let mut loc =
+        Box::new(embedded_localiser(geometric_params(), None).map_err(|e| e.to_string())?);
     let geometric = report::run_embedded(&mut loc, None, text, |_, _| Ok(())).map_err(err)?;
-    *loc = Localiser::new_embedded(semantic_params()).map_err(|e| e.to_string())?;
+    *loc =
+        embedded_localiser(semantic_params(), Some(SEMANTIC_SCHEME)).map_err(|e| e.to_string())?;
     let mut storage = Box::new(SegStorage::new());
-    let mut sem = Semantics::new(MODEL_BLOB, WIDTH, HEIGHT, SEMANTIC_SCHEME, storage.memory())
-        .map_err(|e| e.to_string())?;
+    let mut sem =
+        Network::new(MODEL_BLOB, WIDTH, HEIGHT, storage.memory()).map_err(|e| e.to_string())?;
     let semantic =
         report::run_embedded(&mut loc, Some(&mut sem), text, |_, _| Ok(())).map_err(err)?;
     Ok(geometric.tracked() && semantic.tracked())

@@ -41,12 +41,13 @@ mod fw {
     use core::fmt::{self, Write};
     use core::mem::MaybeUninit;
 
+    use semloc_firmware_sim::core_crate::seg::WeightScheme;
     use semloc_firmware_sim::core_crate::tracker::TrackerParams;
     use semloc_firmware_sim::embedded::{HEIGHT, MODEL_BLOB, WIDTH};
     use semloc_firmware_sim::report::{self, RunSummary};
     use semloc_firmware_sim::{
-        geometric_params, semantic_params, Localiser, LocaliserError, SegStorage, Semantics,
-        SEMANTIC_SCHEME,
+        embedded_localiser, geometric_params, semantic_params, Localiser, LocaliserError, Network,
+        SegStorage, SEMANTIC_SCHEME,
     };
 
     /// Value `_start` fills the stack with (see [`stack_peak_bytes`]).
@@ -241,17 +242,21 @@ mod fw {
 
     static SEG_STORAGE: SegSlot = SegSlot(UnsafeCell::new(SegStorage::new()));
 
-    /// Builds a localiser with `params` in its static slot, replacing the previous one. Not
+    /// Builds a localiser with `params` and `semantics` in its static slot, replacing the previous one. Not
     /// inlined: the by-value temporaries of the constructors (tens of MiB at worst) are in
     /// this frame, popped before frames run.
     #[inline(never)]
-    fn build(con: &mut Console, params: TrackerParams) -> &'static mut Localiser {
+    fn build(
+        con: &mut Console,
+        params: TrackerParams,
+        semantics: Option<WeightScheme>,
+    ) -> &'static mut Localiser {
         // SAFETY: see `Slot`: callers drop the reference of the previous call before calling
         // again (`rust_main` uses each one for one pass only), so no two live references to
         // the slot exist.
         let slot = unsafe { &mut *LOCALISER.0.get() };
         // Written straight into the static slot (the Result around it lives there too).
-        match slot.write(Localiser::new_embedded(params)) {
+        match slot.write(embedded_localiser(params, semantics)) {
             Ok(l) => l,
             Err(e) => {
                 let _ = writeln!(con, "error: {e}");
@@ -265,14 +270,14 @@ mod fw {
     fn pass(
         con: &mut Console,
         loc: &mut Localiser,
-        semantics: Option<&mut Semantics<'_>>,
+        network: Option<&mut Network<'_>>,
         name: &str,
     ) -> Option<RunSummary> {
         let top = core::ptr::addr_of!(__stack_top) as usize;
         let base = top - repaint_stack();
         let t0 = counter().0;
         let mut last = t0;
-        let run = report::run_embedded(loc, semantics, con, |out, i| {
+        let run = report::run_embedded(loc, network, con, |out, i| {
             let ms = ms_since(last);
             last = counter().0;
             writeln!(out, "@ frame {i} {ms:.1} ms")
@@ -299,7 +304,7 @@ mod fw {
     extern "C" fn rust_main() -> ! {
         let mut con = Console::new();
         let (t0, frq) = counter();
-        let loc = build(&mut con, geometric_params());
+        let loc = build(&mut con, geometric_params(), None);
         let _ = writeln!(
             con,
             "@ aarch64 bare metal: localiser {} bytes in .bss, timer {} Hz, init {:.1} ms, \
@@ -311,17 +316,16 @@ mod fw {
         );
         let geometric = pass(&mut con, loc, None, "geometric");
 
-        let loc = build(&mut con, semantic_params());
+        let loc = build(&mut con, semantic_params(), Some(SEMANTIC_SCHEME));
         // SAFETY: see `SegSlot`: the only reference to the storage ever made.
         let storage = unsafe { &mut *SEG_STORAGE.0.get() };
-        let semantic =
-            match Semantics::new(MODEL_BLOB, WIDTH, HEIGHT, SEMANTIC_SCHEME, storage.memory()) {
-                Ok(mut sem) => pass(&mut con, loc, Some(&mut sem), "semantic"),
-                Err(e) => {
-                    let _ = writeln!(con, "error: {e}");
-                    None
-                }
-            };
+        let semantic = match Network::new(MODEL_BLOB, WIDTH, HEIGHT, storage.memory()) {
+            Ok(mut net) => pass(&mut con, loc, Some(&mut net), "semantic"),
+            Err(e) => {
+                let _ = writeln!(con, "error: {e}");
+                None
+            }
+        };
         let code = match (geometric, semantic) {
             (Some(g), Some(s)) if g.tracked() && s.tracked() => 0,
             (Some(_), Some(_)) => 2,

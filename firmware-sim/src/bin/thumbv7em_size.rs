@@ -35,7 +35,8 @@ mod probe {
 
     use semloc_firmware_sim::embedded::{CAMERA, HEIGHT, MODEL_BLOB, WIDTH};
     use semloc_firmware_sim::{
-        semantic_params, Localiser, LocaliserError, SegStorage, Semantics, SEMANTIC_SCHEME,
+        semantic_params, Localiser, LocaliserConfig, LocaliserError, Network, SegStorage,
+        SEMANTIC_SCHEME,
     };
 
     const PIXELS: usize = WIDTH * HEIGHT;
@@ -70,28 +71,20 @@ mod probe {
         // SAFETY: see `Slot`: these are the only references to the statics ever made.
         let (slot, storage, buf) =
             unsafe { (&mut *LOCALISER.0.get(), &mut *SEG_STORAGE.0.get(), &*CAMERA_BUF.0.get()) };
-        let params = semantic_params();
-        let Ok(loc) =
-            slot.write(Localiser::new(black_box(CAMERA), WIDTH as u32, HEIGHT as u32, params))
-        else {
-            halt()
+        let config = LocaliserConfig {
+            tracker: semantic_params(),
+            semantics: Some(SEMANTIC_SCHEME),
+            ..LocaliserConfig::new(black_box(CAMERA), WIDTH as u32, HEIGHT as u32)
         };
-        let Ok(mut sem) =
-            Semantics::new(black_box(MODEL_BLOB), WIDTH, HEIGHT, SEMANTIC_SCHEME, storage.memory())
+        let Ok(loc) = slot.write(Localiser::new(&config)) else { halt() };
+        let Ok(mut sem) = Network::new(black_box(MODEL_BLOB), WIDTH, HEIGHT, storage.memory())
         else {
             halt()
         };
         let (left, right) = buf.split_at(PIXELS);
         let mut t = 0.0;
         loop {
-            let out = loc.process_raw(
-                black_box(left),
-                black_box(right),
-                WIDTH,
-                HEIGHT,
-                t,
-                Some(&mut sem),
-            );
+            let out = loc.process_raw(black_box(left), black_box(right), t, Some(&mut sem));
             black_box(out.ok());
             t += 0.1;
         }

@@ -35,12 +35,12 @@ use core::fmt;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use semloc_core::tracker::{TrackState, TrackerParams};
+use semloc_core::tracker::TrackState;
 
 use crate::report::pose_row;
 use crate::{
-    geometric_params, semantic_params, Localiser, LocaliserError, SegMemory, Semantics,
-    SEMANTIC_SCHEME,
+    geometric_params, semantic_params, Localiser, LocaliserConfig, LocaliserError, Network,
+    NetworkMemory, SEMANTIC_SCHEME,
 };
 use faults::{FaultKind, FaultSpec, Injector};
 use health::{ClockAction, Detection, HealthParams, Mode, Monitor};
@@ -564,17 +564,11 @@ struct SegBufs {
     arena: Vec<i8>,
     input: Vec<u8>,
     model_labels: Vec<u8>,
-    labels: Vec<u8>,
-    weights: Vec<u8>,
 }
 
 impl SegBufs {
     fn bytes(&self) -> usize {
-        self.arena.len()
-            + self.input.len()
-            + self.model_labels.len()
-            + self.labels.len()
-            + self.weights.len()
+        self.arena.len() + self.input.len() + self.model_labels.len()
     }
 }
 
@@ -614,8 +608,6 @@ fn run_here(source: &mut dyn FrameSource, cfg: &SimConfig) -> Result<SimReport, 
                     arena: vec![0i8; crate::SEG_ARENA_BYTES.max(m.arena_len())],
                     input: vec![0u8; mh * mw],
                     model_labels: vec![0u8; mh * mw],
-                    labels: vec![0u8; frame_bytes],
-                    weights: vec![0u8; frame_bytes],
                 });
             }
             Err(e) => {
@@ -627,14 +619,12 @@ fn run_here(source: &mut dyn FrameSource, cfg: &SimConfig) -> Result<SimReport, 
     let seg_bytes = seg_bufs.as_ref().map_or(0, SegBufs::bytes);
     let mut sem = match (seg_bufs.as_mut(), blob.as_ref()) {
         (Some(sb), Some(b)) => {
-            let mem = SegMemory {
+            let mem = NetworkMemory {
                 arena: &mut sb.arena,
                 input: &mut sb.input,
                 model_labels: &mut sb.model_labels,
-                labels: &mut sb.labels,
-                weights: &mut sb.weights,
             };
-            match Semantics::new(b.bytes(), w, h, SEMANTIC_SCHEME, mem) {
+            match Network::new(b.bytes(), w, h, mem) {
                 Ok(s) => Some(s),
                 Err(e) => {
                     semantics_error = Some(format!("{}: {e}", b.path.display()));
@@ -649,9 +639,12 @@ fn run_here(source: &mut dyn FrameSource, cfg: &SimConfig) -> Result<SimReport, 
         let problem = e.strip_prefix(&format!("{}: ", path.display())).unwrap_or(e).to_string();
         return Err(SimError::Model { path, problem });
     }
-    let params: TrackerParams = if sem.is_some() { semantic_params() } else { geometric_params() };
-    let mut loc =
-        Box::new(Localiser::new(cam, w as u32, h as u32, params).map_err(SimError::Localiser)?);
+    let config = LocaliserConfig {
+        tracker: if sem.is_some() { semantic_params() } else { geometric_params() },
+        semantics: sem.is_some().then_some(SEMANTIC_SCHEME),
+        ..LocaliserConfig::new(cam, w as u32, h as u32)
+    };
+    let mut loc = Box::new(Localiser::new(&config).map_err(SimError::Localiser)?);
     let mut ring = FrameRing::new(cfg.ring_capacity, frame_bytes);
     let mut records: Vec<FrameRecord> = Vec::with_capacity(n);
     let mut exec: Vec<f64> = Vec::with_capacity(n);
@@ -858,7 +851,7 @@ struct Counters {
 /// The ECU task: the localiser, the network stage, the health monitor, the mode.
 struct Ecu<'l, 's> {
     loc: &'l mut Localiser,
-    sem: Option<&'l mut Semantics<'s>>,
+    sem: Option<&'l mut Network<'s>>,
     monitor: Monitor,
     mode: Mode,
     have_labels: bool,
@@ -916,15 +909,9 @@ impl Ecu<'_, '_> {
         }
         let relabel = !(self.mode == Mode::Degraded && self.have_labels);
         let ts = m.timestamp_s;
-        let front = self.loc.front_end(
-            slot.left(),
-            slot.right(),
-            self.w,
-            self.h,
-            ts,
-            self.sem.as_deref_mut(),
-            relabel,
-        );
+        // Degraded: no network run, the last labels are reused.
+        let network = if relabel { self.sem.as_deref_mut() } else { None };
+        let front = self.loc.front_end(slot.left(), slot.right(), ts, network);
         if self.sem.is_some() {
             rec.labelled = relabel;
             if relabel {
