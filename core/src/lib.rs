@@ -17,6 +17,8 @@
 //! - [`image`]: luma image views and buffers, bilinear resize, 7×7 Gaussian blur.
 //! - [`orb`]: ORB extraction as ORB-SLAM2's `ORBextractor`, in fixed memory, with a
 //!   semantic weight hook.
+//! - `testing` (only under `cfg(test)` or the `testing` feature): the fixtures every crate's
+//!   tests share — KITTI camera, seeded generators, procedural images, golden hashes.
 #![cfg_attr(not(test), no_std)]
 // Nothing reachable from input may panic through these (indexing is bounded by the checks at
 // each entry, fuzzed in tests/fuzz); tests may unwrap.
@@ -44,4 +46,6 @@ pub mod ransac;
 pub mod seg;
 pub mod semdesc;
 pub mod stereo;
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
 pub mod tracker;
