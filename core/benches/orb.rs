@@ -15,6 +15,7 @@ use std::sync::Mutex;
 use criterion::{criterion_group, criterion_main, Criterion};
 use semloc_core::image::{gaussian_blur_7x7, BlurScratch, ImageView, ImageViewMut};
 use semloc_core::orb::{KittiOrbExtractor, OrbConfig, Pyramid, KITTI_MAX_WIDTH};
+use semloc_core::testing;
 
 const W: usize = 1241;
 const H: usize = 376;
@@ -50,34 +51,8 @@ fn read_frame() -> Option<(usize, usize, Vec<u8>)> {
 
 /// Random rectangles, lightly blurred: corners at all scales, uniform over the frame.
 fn synthetic() -> (usize, usize, Vec<u8>) {
-    let mut s = 0x2545_f491u32;
-    let mut next = move |n: u32| {
-        s ^= s << 13;
-        s ^= s >> 17;
-        s ^= s << 5;
-        s % n
-    };
-    let mut img = vec![128u8; W * H];
-    for _ in 0..W * H / 300 {
-        let (rw, rh) = (4 + next(36) as usize, 4 + next(36) as usize);
-        let (x0, y0) = (next(W as u32) as usize, next(H as u32) as usize);
-        let v = next(256) as u8;
-        for y in y0..(y0 + rh).min(H) {
-            img[y * W + x0..y * W + (x0 + rw).min(W)].fill(v);
-        }
-    }
-    let src = img.clone();
-    for y in 1..H - 1 {
-        for x in 1..W - 1 {
-            let mut acc = 0u32;
-            for dy in 0..3 {
-                for dx in 0..3 {
-                    acc += u32::from(src[(y + dy - 1) * W + x + dx - 1]);
-                }
-            }
-            img[y * W + x] = (acc / 9) as u8;
-        }
-    }
+    let mut img = vec![0u8; W * H];
+    testing::rect_texture(&mut img, W, H, 0x2545_f491);
     (W, H, img)
 }
 

@@ -18,6 +18,7 @@ use semloc_core::frame::Frame;
 use semloc_core::image::ImageView;
 use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
 use semloc_core::stereo::{KittiStereoMatcher, StereoParams};
+use semloc_core::testing;
 
 const W: usize = 1241;
 const H: usize = 376;
@@ -26,63 +27,14 @@ static LEFT: Mutex<KittiOrbExtractor> = Mutex::new(KittiOrbExtractor::new());
 static RIGHT: Mutex<KittiOrbExtractor> = Mutex::new(KittiOrbExtractor::new());
 static MATCHER: Mutex<KittiStereoMatcher> = Mutex::new(KittiStereoMatcher::new());
 
-fn xorshift(s: &mut u32, n: u32) -> u32 {
-    *s ^= *s << 13;
-    *s ^= *s >> 17;
-    *s ^= *s << 5;
-    *s % n
-}
-
-/// Value noise on a 6-px grid under random rectangles, 3×3 box blurred.
-fn texture(w: usize, h: usize) -> Vec<u8> {
-    let mut s = 0x2545_f491u32;
-    let (gw, gh, c) = (w / 6 + 2, h / 6 + 2, 6u32);
-    let grid: Vec<u32> = (0..gw * gh).map(|_| xorshift(&mut s, 256)).collect();
-    let mut img = vec![0u8; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let (gx, gy, fx, fy) = (x / 6, y / 6, (x % 6) as u32, (y % 6) as u32);
-            let g = |i: usize, j: usize| grid[(gy + j) * gw + gx + i];
-            let top = g(0, 0) * (c - fx) + g(1, 0) * fx;
-            let bot = g(0, 1) * (c - fx) + g(1, 1) * fx;
-            img[y * w + x] = ((top * (c - fy) + bot * fy) / (c * c)) as u8;
-        }
-    }
-    for _ in 0..w * h / 400 {
-        let (rw, rh) = (3 + xorshift(&mut s, 30) as usize, 3 + xorshift(&mut s, 30) as usize);
-        let (x0, y0) = (xorshift(&mut s, w as u32) as usize, xorshift(&mut s, h as u32) as usize);
-        let v = xorshift(&mut s, 256) as u16;
-        for y in y0..(y0 + rh).min(h) {
-            for p in &mut img[y * w + x0..y * w + (x0 + rw).min(w)] {
-                *p = ((u16::from(*p) + 3 * v) / 4) as u8;
-            }
-        }
-    }
-    let src = img.clone();
-    for y in 1..h - 1 {
-        for x in 1..w - 1 {
-            let mut acc = 0u32;
-            for dy in 0..3 {
-                for dx in 0..3 {
-                    acc += u32::from(src[(y + dy - 1) * w + x + dx - 1]);
-                }
-            }
-            img[y * w + x] = (acc / 9) as u8;
-        }
-    }
-    img
-}
-
-/// `right(x, y) = left(x + d(y), y)`, `d(y) = 5 + y / 8`.
+/// Value noise on a 6-px grid under random rectangles, blurred; `right(x, y) = left(x + d(y),
+/// y)`, `d(y) = 5 + y / 8`.
 fn pair() -> (Vec<u8>, Vec<u8>) {
     let tw = W + 64;
-    let t = texture(tw, H);
+    let mut t = vec![0u8; tw * H];
+    testing::value_noise_texture(&mut t, tw, H, 0x2545_f491, &[6]);
     let (mut l, mut r) = (vec![0u8; W * H], vec![0u8; W * H]);
-    for y in 0..H {
-        let d = 5 + y / 8;
-        l[y * W..(y + 1) * W].copy_from_slice(&t[y * tw..y * tw + W]);
-        r[y * W..(y + 1) * W].copy_from_slice(&t[y * tw + d..y * tw + d + W]);
-    }
+    testing::stereo_pair(&t, tw, &mut l, &mut r, W, |y| 5 + y / 8);
     (l, r)
 }
 

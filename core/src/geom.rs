@@ -595,10 +595,7 @@ mod tests {
     use nalgebra::{SMatrix, SVector};
     use proptest::prelude::*;
 
-    /// KITTI-like intrinsics with fx != fy and cx != cy so swapped axes show up.
-    fn cam() -> StereoCamera {
-        StereoCamera::new(718.0, 702.0, 607.2, 185.2, 0.537).unwrap()
-    }
+    use crate::testing::asymmetric_cam;
 
     /// Per-entry check `|a - b| <= tol * max(1, max|b|)`.
     fn assert_close<const R: usize, const C: usize>(
@@ -793,7 +790,7 @@ mod tests {
 
     #[test]
     fn projection_known_values_and_rejects_behind() {
-        let c = cam();
+        let c = asymmetric_cam();
         let uv = c.project(&Vector3::new(1.0, -2.0, 10.0)).unwrap();
         assert_close(&uv, &Vector2::new(718.0 * 0.1 + 607.2, 702.0 * -0.2 + 185.2), 1e-12, "uv");
         let uvr = c.project_stereo(&Vector3::new(1.0, -2.0, 10.0)).unwrap();
@@ -906,7 +903,7 @@ mod tests {
 
         #[test]
         fn stereo_backproject_round_trip(p in p_cam()) {
-            let c = cam();
+            let c = asymmetric_cam();
             let uvr = c.project_stereo(&p).unwrap();
             prop_assert!((uvr.x - uvr.z - c.bf() / p.z).abs() < 1e-9);
             let depth = c.depth_from_disparity(uvr.x - uvr.z).unwrap();
@@ -918,7 +915,7 @@ mod tests {
 
         #[test]
         fn projection_jacobians_match_finite_differences(p in p_cam()) {
-            let c = cam();
+            let c = asymmetric_cam();
             let fd = fd_jacobian(|q: &Vector3<f64>| c.project(q).unwrap(), &p, 1e-6);
             assert_close(&c.project_jacobian(&p).unwrap(), &fd, 1e-6, "d uv / d p_cam");
             let fd = fd_jacobian(|q: &Vector3<f64>| c.project_stereo(q).unwrap(), &p, 1e-6);
@@ -927,7 +924,7 @@ mod tests {
 
         #[test]
         fn pose_and_point_jacobians_match_finite_differences(t_cw in pose(), pc in p_cam()) {
-            let c = cam();
+            let c = asymmetric_cam();
             let pw = t_cw.inverse().transform_point(&pc);
             let mono = c.project_world(&t_cw, &pw).unwrap();
             let stereo = c.project_world_stereo(&t_cw, &pw).unwrap();

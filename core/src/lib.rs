@@ -74,6 +74,8 @@
 //! - [`image`] — luma image views and buffers, bilinear resize, 7×7 Gaussian blur.
 //! - [`math`] — the one place float transcendental functions come from (libm, same bits on
 //!   every target).
+//! - `testing` (only under `cfg(test)` or the `testing` feature): the fixtures every crate's
+//!   tests share — KITTI camera, seeded generators, procedural images, golden hashes.
 #![cfg_attr(not(test), no_std)]
 // Nothing reachable from input may panic through these (indexing is bounded by the checks at
 // each entry, fuzzed in tests/fuzz); tests may unwrap.
@@ -102,4 +104,6 @@ pub mod ransac;
 pub mod seg;
 pub mod semdesc;
 pub mod stereo;
+#[cfg(any(test, feature = "testing"))]
+pub mod testing;
 pub mod tracker;

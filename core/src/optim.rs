@@ -685,32 +685,16 @@ fn back_substitute(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn cam() -> StereoCamera {
-        StereoCamera {
-            fx_px: 718.856,
-            fy_px: 718.856,
-            cx_px: 607.19,
-            cy_px: 185.22,
-            baseline_m: 0.537,
-        }
-    }
-
-    /// Deterministic pseudo-random numbers in [-1, 1).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-    }
+    use crate::testing::{kitti_cam, Rng};
 
     fn world_points(rng: &mut Rng, n: usize) -> Vec<Vector3<f64>> {
         (0..n)
             .map(|_| {
-                Vector3::new(rng.next() * 15.0, rng.next() * 3.0, 8.0 + (rng.next() + 1.0) * 20.0)
+                Vector3::new(
+                    rng.signed() * 15.0,
+                    rng.signed() * 3.0,
+                    8.0 + (rng.signed() + 1.0) * 20.0,
+                )
             })
             .collect()
     }
@@ -724,12 +708,12 @@ mod tests {
 
     fn pose(rng: &mut Rng, rot: f64, trans: f64) -> Se3 {
         let d = Vector6::new(
-            rng.next() * trans,
-            rng.next() * trans,
-            rng.next() * trans,
-            rng.next() * rot,
-            rng.next() * rot,
-            rng.next() * rot,
+            rng.signed() * trans,
+            rng.signed() * trans,
+            rng.signed() * trans,
+            rng.signed() * rot,
+            rng.signed() * rot,
+            rng.signed() * rot,
         );
         Se3::identity().retract(&d)
     }
@@ -755,8 +739,8 @@ mod tests {
 
     #[test]
     fn pose_optimisation_recovers_pose_and_rejects_outliers() {
-        let mut rng = Rng(0x9e3779b97f4a7c15);
-        let cam = cam();
+        let mut rng = Rng::new(0x9e3779b97f4a7c15);
+        let cam = kitti_cam();
         let truth = pose(&mut rng, 0.05, 0.5);
         let pts = world_points(&mut rng, 300);
         let mut obs: Vec<PoseObs> = pts
@@ -781,8 +765,8 @@ mod tests {
 
     #[test]
     fn zero_weight_observations_do_not_count() {
-        let mut rng = Rng(7);
-        let cam = cam();
+        let mut rng = Rng::new(7);
+        let cam = kitti_cam();
         let truth = Se3::identity();
         let pts = world_points(&mut rng, 50);
         let mut obs: Vec<PoseObs> = pts
@@ -803,8 +787,8 @@ mod tests {
 
     #[test]
     fn bundle_adjustment_converges_from_perturbed_window() {
-        let mut rng = Rng(0x1234_5678_9abc_def1);
-        let cam = cam();
+        let mut rng = Rng::new(0x1234_5678_9abc_def1);
+        let cam = kitti_cam();
         // Five keyframes driving forward 1 m each.
         let truth: Vec<Se3> = (0..5)
             .map(|k| Se3::new(Matrix3::identity(), Vector3::new(0.0, 0.0, -(k as f64))))
@@ -824,17 +808,17 @@ mod tests {
         let mut poses = truth.clone();
         for p in poses.iter_mut().skip(1) {
             *p = p.retract(&Vector6::new(
-                rng.next() * 0.1,
-                rng.next() * 0.1,
-                rng.next() * 0.1,
-                rng.next() * 0.005,
-                rng.next() * 0.005,
-                rng.next() * 0.005,
+                rng.signed() * 0.1,
+                rng.signed() * 0.1,
+                rng.signed() * 0.1,
+                rng.signed() * 0.005,
+                rng.signed() * 0.005,
+                rng.signed() * 0.005,
             ));
         }
         let mut pts: Vec<Vector3<f64>> = pts_true
             .iter()
-            .map(|p| p + Vector3::new(rng.next(), rng.next(), rng.next()) * 0.05)
+            .map(|p| p + Vector3::new(rng.signed(), rng.signed(), rng.signed()) * 0.05)
             .collect();
         let mut backup = vec![Vector3::zeros(); pts.len()];
         let mut scratch = Box::new(BaScratch::new());
@@ -854,7 +838,7 @@ mod tests {
 
     #[test]
     fn bundle_adjustment_rejects_malformed_problems() {
-        let cam = cam();
+        let cam = kitti_cam();
         let mut poses = vec![Se3::identity(); 2];
         let mut pts = vec![Vector3::new(0.0, 0.0, 10.0); 2];
         let mut backup = vec![Vector3::zeros(); 2];

@@ -155,17 +155,8 @@ pub fn ransac_pose(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::kitti_cam;
     use nalgebra::Vector6;
-
-    fn cam() -> StereoCamera {
-        StereoCamera {
-            fx_px: 718.856,
-            fy_px: 718.856,
-            cx_px: 607.19,
-            cy_px: 185.22,
-            baseline_m: 0.537,
-        }
-    }
 
     #[test]
     fn kabsch_recovers_a_rigid_transform() {
@@ -185,7 +176,7 @@ mod tests {
 
     #[test]
     fn ransac_prefers_the_larger_consistent_set() {
-        let cam = cam();
+        let cam = kitti_cam();
         let truth = Se3::exp(&Vector6::new(0.1, 0.0, -1.0, 0.0, 0.02, 0.0));
         // A "moving object": 40 % of the points obey a different motion (static w.r.t. camera).
         let object = Se3::identity();

@@ -694,6 +694,7 @@ mod tests {
 
     use super::*;
     use crate::orb::{pyramid_capacity, OrbConfig, OrbExtractor};
+    use crate::testing;
 
     const W: usize = 640;
     const H: usize = 240;
@@ -706,77 +707,15 @@ mod tests {
     /// fx = 500 px, baseline 0.5 m.
     const PARAMS: StereoParams = StereoParams::new(250.0, 0.5);
 
-    struct Rng(u32);
-    impl Rng {
-        fn below(&mut self, n: u32) -> u32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 17;
-            self.0 ^= self.0 << 5;
-            self.0 % n
-        }
-    }
-
-    /// Value noise (random levels on 9- and 4-px grids, bilinear) under random rectangles,
-    /// 3×3 box blurred: unique texture everywhere and corners at every scale.
-    fn texture(w: usize, h: usize, seed: u32) -> Vec<u8> {
-        let mut rng = Rng(seed | 1);
-        let mut img = vec![0u8; w * h];
-        let mut acc = vec![0u32; w * h];
-        for cell in [9usize, 4] {
-            let (gw, gh) = (w / cell + 2, h / cell + 2);
-            let grid: Vec<u32> = (0..gw * gh).map(|_| rng.below(256)).collect();
-            for y in 0..h {
-                for x in 0..w {
-                    let (gx, gy) = (x / cell, y / cell);
-                    let (fx, fy) = ((x % cell) as u32, (y % cell) as u32);
-                    let c = cell as u32;
-                    let g = |i: usize, j: usize| grid[(gy + j) * gw + gx + i];
-                    let top = g(0, 0) * (c - fx) + g(1, 0) * fx;
-                    let bot = g(0, 1) * (c - fx) + g(1, 1) * fx;
-                    acc[y * w + x] += (top * (c - fy) + bot * fy) / (c * c);
-                }
-            }
-        }
-        for (p, a) in img.iter_mut().zip(&acc) {
-            *p = (a / 2) as u8;
-        }
-        for _ in 0..w * h / 400 {
-            let (rw, rh) = (3 + rng.below(30) as usize, 3 + rng.below(30) as usize);
-            let (x0, y0) = (rng.below(w as u32) as usize, rng.below(h as u32) as usize);
-            let v = rng.below(256) as u8;
-            for y in y0..(y0 + rh).min(h) {
-                for p in &mut img[y * w + x0..y * w + (x0 + rw).min(w)] {
-                    *p = ((u16::from(*p) + 3 * u16::from(v)) / 4) as u8;
-                }
-            }
-        }
-        let src = img.clone();
-        for y in 1..h - 1 {
-            for x in 1..w - 1 {
-                let mut s = 0u32;
-                for dy in 0..3 {
-                    for dx in 0..3 {
-                        s += u32::from(src[(y + dy - 1) * w + x + dx - 1]);
-                    }
-                }
-                img[y * w + x] = (s / 9) as u8;
-            }
-        }
-        img
-    }
-
-    /// `(left, right)` with `right(x, y) = left(x + d(y), y)` (content beyond the left image's
-    /// right edge continues the texture).
+    /// Value noise on 9- and 4-px grids under random rectangles, blurred
+    /// ([`testing::value_noise_texture`]): unique texture everywhere and corners at every scale.
+    /// `(left, right)` with `right(x, y) = left(x + d(y), y)`.
     fn pair(seed: u32, d: impl Fn(usize) -> usize) -> (Vec<u8>, Vec<u8>) {
         let tw = W + 64;
-        let t = texture(tw, H, seed);
-        let mut l = vec![0u8; W * H];
-        let mut r = vec![0u8; W * H];
-        for y in 0..H {
-            let dy = d(y);
-            l[y * W..(y + 1) * W].copy_from_slice(&t[y * tw..y * tw + W]);
-            r[y * W..(y + 1) * W].copy_from_slice(&t[y * tw + dy..y * tw + dy + W]);
-        }
+        let mut t = vec![0u8; tw * H];
+        testing::value_noise_texture(&mut t, tw, H, seed, &[9, 4]);
+        let (mut l, mut r) = (vec![0u8; W * H], vec![0u8; W * H]);
+        testing::stereo_pair(&t, tw, &mut l, &mut r, W, d);
         (l, r)
     }
 

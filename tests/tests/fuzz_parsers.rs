@@ -12,21 +12,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use semloc::dataset::Sequence;
-
-/// A tiny xorshift generator: the harness must be reproducible from its seed.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
+// A seeded xorshift: the harness must be reproducible from its seed.
+use semloc_core::testing::Rng;
 
 /// Tokens that break number and line parsers in interesting ways.
 const TOKENS: &[&str] = &[
@@ -131,7 +118,7 @@ fn seed() -> u64 {
 /// Runs `case` on mutations of `seeds` until the time budget is spent; returns how many ran.
 /// A panic is reported with the input and the seed, then fails the test.
 fn fuzz(name: &str, seeds: &[&str], mut case: impl FnMut(&str, usize)) -> usize {
-    let mut rng = Rng(seed().wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = Rng::new(seed().wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     let (t0, limit) = (Instant::now(), budget());
     let mut n = 0;
     while t0.elapsed() < limit {

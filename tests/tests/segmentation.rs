@@ -14,15 +14,10 @@ use semloc::nn::tract_ref::TractRef;
 use semloc::nn::SlmBlob;
 use semloc_core::nn::graph::{argmax, prepare_input, run, Kernels, Letterbox};
 use semloc_core::nn::simd::{set_max_isa, Isa};
+use semloc_core::testing::Fnv1a;
 
 fn artefact(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/artefacts").join(name)
-}
-
-fn fnv1a(bytes: impl IntoIterator<Item = u8>) -> u64 {
-    bytes
-        .into_iter()
-        .fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
 }
 
 /// A fixed 192x640 luma pattern with edges, gradients and texture.
@@ -70,7 +65,9 @@ fn golden_logits_on_a_fixed_input_at_every_isa_level() {
     for &l in &labels {
         hist[l as usize] += 1;
     }
-    let hash = fnv1a(reference.iter().map(|&v| v as u8));
+    let mut fnv = Fnv1a::new();
+    reference.iter().for_each(|&v| fnv.eat(&[v as u8]));
+    let hash = fnv.finish();
     println!("logits FNV-1a {hash:#018x}, label histogram {hist:?}");
     assert!(hist.iter().filter(|&&n| n > 0).count() >= 3, "degenerate labels {hist:?}");
     assert_eq!(hash, GOLDEN_LOGITS_FNV, "pinned logits changed (histogram {hist:?})");

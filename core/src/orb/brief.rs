@@ -215,6 +215,7 @@ const PATTERN_POINTS: [(i32, i32); 512] = {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing;
 
     #[test]
     fn umax_matches_orbslam2_construction() {
@@ -295,15 +296,9 @@ mod tests {
         // A patch and its copy rotated by 90° (exact pixel rotation) give (nearly) the same
         // descriptor once each is steered by its own orientation.
         let n = 61usize;
-        let mut s = 0x9e37_79b9u32;
-        let mut raw: Vec<f32> = (0..n * n)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 17;
-                s ^= s << 5;
-                (s >> 24) as f32
-            })
-            .collect();
+        let mut noise = vec![0u8; n * n];
+        testing::noise(&mut noise, 0x9e37_79b9);
+        let mut raw: Vec<f32> = noise.iter().map(|&v| f32::from(v)).collect();
         // Smooth so that rounding the rotated pattern lands on similar values.
         for _ in 0..4 {
             let src = raw.clone();
@@ -319,13 +314,8 @@ mod tests {
             }
         }
         let a: Vec<u8> = raw.iter().map(|&v| v as u8).collect();
-        // Rotate 90° clockwise: b(x', y') = a(x, y) with x' = n-1-y, y' = x.
         let mut b = vec![0u8; n * n];
-        for y in 0..n {
-            for x in 0..n {
-                b[x * n + (n - 1 - y)] = a[y * n + x];
-            }
-        }
+        testing::rotate_90_cw(&a, &mut b, n);
         let av = ImageView::from_slice(&a, n, n).unwrap();
         let bv = ImageView::from_slice(&b, n, n).unwrap();
         let c = n / 2;

@@ -303,15 +303,9 @@ mod tests {
     }
 
     fn noise(w: usize, h: usize, seed: u32) -> Vec<u8> {
-        let mut s = seed;
-        (0..w * h)
-            .map(|_| {
-                s ^= s << 13;
-                s ^= s >> 17;
-                s ^= s << 5;
-                (s >> 24) as u8
-            })
-            .collect()
+        let mut img = vec![0u8; w * h];
+        crate::testing::noise(&mut img, seed);
+        img
     }
 
     #[test]

@@ -8,6 +8,7 @@ use std::sync::Mutex;
 use std::vec::Vec;
 
 use super::*;
+use crate::testing::{self, Fnv1a};
 
 /// Extractor for synthetic frames up to 640 × 480.
 type TestExt = OrbExtractor<640, { 640 * 480 }, { pyramid_capacity(640, 480, 8) }, 2048, 16384>;
@@ -20,49 +21,10 @@ fn with_ext<R>(f: impl FnOnce(&mut TestExt) -> R) -> R {
     f(&mut g)
 }
 
-struct Rng(u32);
-impl Rng {
-    fn next(&mut self) -> u32 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 17;
-        self.0 ^= self.0 << 5;
-        self.0
-    }
-    fn below(&mut self, n: u32) -> u32 {
-        self.next() % n
-    }
-}
-
-/// Random overlapping rectangles (corners at every scale) with a light 3×3 box blur, uniform
-/// over the frame.
+/// Random overlapping rectangles, lightly blurred ([`testing::rect_texture`]).
 pub(crate) fn textured(w: usize, h: usize, seed: u32) -> Vec<u8> {
-    let mut rng = Rng(seed | 1);
-    let mut img = vec![128u8; w * h];
-    let n_rects = w * h / 300;
-    for _ in 0..n_rects {
-        let rw = 4 + rng.below(36) as usize;
-        let rh = 4 + rng.below(36) as usize;
-        let x0 = rng.below(w as u32) as usize;
-        let y0 = rng.below(h as u32) as usize;
-        let v = rng.below(256) as u8;
-        for y in y0..(y0 + rh).min(h) {
-            for x in x0..(x0 + rw).min(w) {
-                img[y * w + x] = v;
-            }
-        }
-    }
-    let src = img.clone();
-    for y in 1..h - 1 {
-        for x in 1..w - 1 {
-            let mut s = 0u32;
-            for dy in 0..3 {
-                for dx in 0..3 {
-                    s += src[(y + dy - 1) * w + x + dx - 1] as u32;
-                }
-            }
-            img[y * w + x] = (s / 9) as u8;
-        }
-    }
+    let mut img = vec![0u8; w * h];
+    testing::rect_texture(&mut img, w, h, seed);
     img
 }
 
@@ -262,11 +224,7 @@ fn descriptors_survive_a_90_degree_rotation() {
         let n = 400usize;
         let a = textured(n, n, 11);
         let mut b = vec![0u8; n * n];
-        for y in 0..n {
-            for x in 0..n {
-                b[x * n + (n - 1 - y)] = a[y * n + x];
-            }
-        }
+        testing::rotate_90_cw(&a, &mut b, n);
         let va = ImageView::from_slice(&a, n, n).unwrap();
         let vb = ImageView::from_slice(&b, n, n).unwrap();
         let fa: Vec<(KeyPoint, Descriptor)> = {
@@ -399,13 +357,8 @@ fn real_kitti_frame() {
 
 /// FNV-1a over every output bit of an extraction: key point fields, descriptors and counters.
 fn fnv1a_features(f: &Features<2048>) -> u64 {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    };
+    let mut h = Fnv1a::new();
+    let mut eat = |bytes: &[u8]| h.eat(bytes);
     eat(&(f.len() as u64).to_le_bytes());
     for (k, d) in f.keypoints().iter().zip(f.descriptors()) {
         eat(&k.x.to_bits().to_le_bytes());
@@ -428,13 +381,14 @@ fn fnv1a_features(f: &Features<2048>) -> u64 {
             eat(&v.to_le_bytes());
         }
     }
-    h
+    h.finish()
 }
 
 /// Uniform 8-bit noise: a corner at almost every pixel, so candidate storage overflows.
 fn noise_frame(w: usize, h: usize, seed: u32) -> Vec<u8> {
-    let mut rng = Rng(seed | 1);
-    (0..w * h).map(|_| (rng.next() >> 24) as u8).collect()
+    let mut img = vec![0u8; w * h];
+    testing::noise(&mut img, seed | 1);
+    img
 }
 
 /// Name, configuration, width, height, pixels, weighted, expected hash.
