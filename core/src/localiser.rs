@@ -45,7 +45,7 @@
 //! # Ok(()) }
 //! # fn main() {
 //! #     // ≈ 11 MiB by value: more than a main thread's default stack.
-//! #     let t = std::thread::Builder::new().stack_size(64 << 20).spawn(run).unwrap();
+//! #     let t = std::thread::Builder::new().stack_size(256 << 20).spawn(run).unwrap();
 //! #     t.join().unwrap().unwrap();
 //! # }
 //! ```
