@@ -726,6 +726,35 @@ mod tests {
         Some(PwCase::new(rng, xs, c_out, 20_000, false))
     });
 
+    kernel_equivalence!(depthwise_wide_layers_are_bit_equal, 0xd6, 12, |rng, _| {
+        // more than 256 channels: several passes of the x86 kernel's group constants, and the
+        // portable kernel's scalar requantisation (its lane-form table holds 256 channels)
+        let xs = Shape::new(rng.usize(257, 300), rng.usize(1, 7), rng.usize(1, 9));
+        let stride = rng.usize(1, 2);
+        Some(DwCase::new(rng, xs, stride, 5000, true))
+    });
+
+    kernel_equivalence!(first_conv_many_channels_are_bit_equal, 0xc1, 30, |rng, _| {
+        // more than 64 output channels: several passes of the x86 kernel's 8 groups; rows up
+        // to 60 wide for several runs of 8 stride-2 pixels
+        let xs = Shape::new(1, rng.usize(1, 12), rng.usize(1, 60));
+        let c_out = rng.usize(41, 80);
+        let p = rand_conv(rng, c_out, (3, 3));
+        ConvCase::new(rng, xs, p, 20_000, true)
+    });
+
+    kernel_equivalence!(pointwise_wide_layers_are_bit_equal, 0x13, 12, |rng, i| {
+        // more than 256 output channels (several passes of the AVX2 kernel's 32 blocks), or
+        // rows wider than every staged tile (the unstaged x86 paths, the portable wide path)
+        let (c_in, c_out) = if i % 2 == 0 {
+            (rng.usize(1, 40), rng.usize(257, 300))
+        } else {
+            (rng.usize(PW_STAGE + 1, PW_STAGE + 80), rng.usize(1, 30))
+        };
+        let xs = Shape::new(c_in, rng.usize(1, 4), rng.usize(1, 9));
+        Some(PwCase::new(rng, xs, c_out, 20_000, true))
+    });
+
     #[test]
     fn pointwise_packing_round_trips() {
         let mut rng = Rng::new(0x9a);

@@ -261,6 +261,18 @@ mod tests {
         Some(ResizeCase::new(rng, xs, size, i % 2 == 0, true))
     });
 
+    kernel_equivalence!(resize_beyond_the_x86_limits_is_bit_equal, 0x60, 4, |rng, i| {
+        // more channels than the x86 kernel's chunk holds, or a wider output than its column
+        // table: the portable kernel on every level
+        let (xs, size) = match i {
+            0 => (Shape::new(2040, 1, 2), (2, 3)),
+            1 => (Shape::new(2100, 2, 1), (3, 1)),
+            2 => (Shape::new(1, 2, 3), (2, 2100)),
+            _ => (Shape::new(3, 1, 2), (1, 2049)),
+        };
+        Some(ResizeCase::new(rng, xs, size, false, true))
+    });
+
     #[test]
     fn resize_bad_operands_are_errors() {
         let q = ResizeQuant::new(0.1, 0, 0.1, 0);
