@@ -531,7 +531,7 @@ fn align_vec(bytes: &[u8]) -> Vec<u8> {
 fn kernels(c: &mut Criterion) {
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
-        use semloc_core::nn::simd::{isa, set_max_isa, Isa};
+        use semloc_core::nn::x86::{isa, set_max_isa, Isa};
         match std::env::var("SEMLOC_NN_ISA").as_deref() {
             Ok("portable") => set_max_isa(Isa::Portable),
             Ok("avx2") => set_max_isa(Isa::Avx2),

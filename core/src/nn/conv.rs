@@ -13,22 +13,18 @@
 //! formed first and the bias added with saturation, so no input can overflow (reductions are
 //! bounded by [`MAX_REDUCTION`]). Dilation is 1 (the only value the network uses).
 //!
-//! The fast kernels compute the same integers: valid tap ranges are hoisted out of the inner
-//! loops, which run over contiguous NHWC slices (`kw_valid · c_in` input bytes per kernel row for
-//! the general conv, channel vectors for depthwise, one input row per pixel for the 1×1 GEMM).
-//! On x86-64 with AVX2 the 1×1 GEMM, the depthwise conv and the one-channel 3×3 conv run as
-//! `nn::simd` kernels (see there); elsewhere, and whenever an op's accumulators could
-//! saturate the plain vector arithmetic ([`super::quant::fits_simd_requant`], never for a real
-//! network), the portable ones. Stack: the portable depthwise kernel a 64-channel `i32`
-//! accumulator block and lane-form requantisers (6.3 KiB), the portable GEMM an unpacked
-//! 8-channel weight panel and a staged row (10 KiB).
+//! This file holds the ONNX definition: parameters, the checks at entry, the `*_reference`
+//! kernels (plain loops, no scratch) and the packed 1×1 weight layout. The `*_fast` entries
+//! check their operands the same way and hand them to `nn::dispatch`, which runs the x86
+//! kernel (`nn::x86::{conv1, depthwise, pointwise}`) where one applies, else the portable one
+//! (`nn::portable::{conv, depthwise, pointwise}`); all compute the same integers. Stack: the
+//! references none; the fast kernels as documented in their files (at most 21 KiB).
 //!
 //! **1×1 weights are packed** ([`pack_pointwise`], `[⌈O/8⌉][⌈I/4⌉][8][4]`), the layout the
 //! model blob stores; the reference reads them through [`pointwise_packed_index`].
 
-use super::quant::{clamp_range, fits_simd_requant as fits_requant_lanes, Lanes8};
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-use super::quant::{fits_simd_requant, simd_allowed};
+use super::dispatch;
+use super::quant::clamp_range;
 use super::{check_param, check_tensor, check_zero_point, NnError, Requant, Shape, MAX_REDUCTION};
 
 /// Quantisation of a conv: zero points, per-output-channel requantisers, fused ReLU.
@@ -140,25 +136,10 @@ pub fn conv2d_reference(
     Ok(os)
 }
 
-/// `Σ (x − zp)·w` over two equally long slices; the shape of loop LLVM vectorises.
-#[inline]
-fn dot(x: &[i8], w: &[i8], zp: i32) -> i32 {
-    x.iter().zip(w).map(|(&a, &b)| (a as i32 - zp) * b as i32).sum()
-}
-
-/// The valid tap range `[k0, k1)` of a window starting at `start − pad` on an axis of `n`.
-#[inline]
-fn tap_range(o: usize, stride: usize, pad: usize, k: usize, n: usize) -> (usize, usize) {
-    let start = o * stride;
-    let k0 = pad.saturating_sub(start);
-    let k1 = k.min((n + pad).saturating_sub(start));
-    (k0, k1.max(k0))
-}
-
-/// General conv, fast: per output pixel the valid kernel rows are contiguous NHWC runs of
-/// `kw_valid · c_in` bytes in both input and weights, so each is one dot product. On x86-64
-/// with AVX2 a 3×3 conv of a one-channel input (the network's first layer) takes
-/// `nn::simd`'s kernel: five `vpmaddwd` per 8 output channels and pixel.
+/// General conv, fast: the same integers as [`conv2d_reference`], from the kernel
+/// `nn::dispatch` picks — on x86-64 with AVX2 for a 3×3 conv of a one-channel input (the
+/// network's first layer) `nn::x86::conv1` (five `vpmaddwd` per 8 output channels and pixel),
+/// else `nn::portable::conv` (one dot product per valid kernel row, contiguous in NHWC).
 #[allow(clippy::too_many_arguments)]
 pub fn conv2d_fast(
     x: &[i8],
@@ -170,55 +151,7 @@ pub fn conv2d_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     let os = check_conv2d(x, xs, p, w, b, q, out)?;
-    let (kh, kw) = p.kernel;
-    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-    if simd_allowed()
-        && xs.c == 1
-        && p.kernel == (3, 3)
-        && fits_simd_requant(9 * 255 * 127, b, q.requant)
-    {
-        let a = super::simd::Conv1 {
-            x,
-            h: xs.h,
-            w: xs.w,
-            oh: os.h,
-            ow: os.w,
-            stride: p.stride,
-            pad: (p.pads[0], p.pads[1]),
-            wt: w,
-            bias: b,
-            requant: q.requant,
-            zp: q.input_zero_point,
-            zo: q.output_zero_point,
-            lo,
-        };
-        super::simd::conv1(&a, out);
-        return Ok(os);
-    }
-    let ci = xs.c;
-    let wk = kh * kw * ci;
-    let out = &mut out[..os.len()];
-    for (oy, orow) in out.chunks_exact_mut(os.w * os.c).enumerate() {
-        let (ky0, ky1) = tap_range(oy, p.stride.0, p.pads[0], kh, xs.h);
-        for (ox, opix) in orow.chunks_exact_mut(os.c).enumerate() {
-            let (kx0, kx1) = tap_range(ox, p.stride.1, p.pads[1], kw, xs.w);
-            let run = (kx1 - kx0) * ci;
-            let ix0 = ox * p.stride.1 + kx0 - p.pads[1];
-            for ((o, wc), (&bias, rq)) in
-                opix.iter_mut().zip(w.chunks_exact(wk)).zip(b.iter().zip(q.requant))
-            {
-                let mut acc = 0i32;
-                for ky in ky0..ky1 {
-                    let iy = oy * p.stride.0 + ky - p.pads[0];
-                    let xo = (iy * xs.w + ix0) * ci;
-                    let wo = (ky * kw + kx0) * ci;
-                    acc += dot(&x[xo..xo + run], &wc[wo..wo + run], q.input_zero_point);
-                }
-                *o = rq.to_i8(acc.saturating_add(bias), q.output_zero_point, lo, hi);
-            }
-        }
-    }
+    dispatch::conv2d(x, xs, p, w, b, q, out, os);
     Ok(os)
 }
 
@@ -286,15 +219,11 @@ pub fn depthwise3x3_reference(
     Ok(os)
 }
 
-/// Channels per accumulator block of the fast depthwise kernel.
-const DW_BLOCK: usize = 64;
-/// Channel groups of 8 whose requantisers the portable depthwise kernel keeps in lane form.
-const DW_LANE_GROUPS: usize = 32;
-
-/// Depthwise 3×3, fast. On x86-64 with AVX2: `nn::simd`'s kernel (8 channels per vector;
-/// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation). Portable:
-/// per output pixel and 64-channel block, each valid tap adds a whole channel vector
-/// (`x[iy, ix, c..]·w[ky, kx, c..]`) to a stack accumulator, which auto-vectorises.
+/// Depthwise 3×3, fast: the same integers as [`depthwise3x3_reference`], from the kernel
+/// `nn::dispatch` picks — on x86-64 with AVX2 `nn::x86::depthwise` (8 channels per vector;
+/// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation), else
+/// `nn::portable::depthwise` (per output pixel and 64-channel block, each valid tap adds a
+/// whole channel vector to a stack accumulator, which auto-vectorises).
 #[allow(clippy::too_many_arguments)]
 pub fn depthwise3x3_fast(
     x: &[i8],
@@ -306,102 +235,8 @@ pub fn depthwise3x3_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     let os = check_depthwise(x, xs, stride, w, b, q, out)?;
-    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-    if simd_allowed() && fits_simd_requant(9 * 255 * 127, b, q.requant) {
-        let a = super::simd::Dw {
-            x,
-            h: xs.h,
-            w: xs.w,
-            c: xs.c,
-            stride,
-            wt: w,
-            bias: b,
-            requant: q.requant,
-            zp: q.input_zero_point,
-            zo: q.output_zero_point,
-            lo,
-        };
-        super::simd::depthwise(&a, out);
-        return Ok(os);
-    }
-    depthwise3x3_portable(x, xs, stride, w, b, q, out, os, (lo, hi));
+    dispatch::depthwise3x3(x, xs, stride, w, b, q, out, os);
     Ok(os)
-}
-
-/// The portable depthwise kernel (see [`depthwise3x3_fast`]).
-#[allow(clippy::too_many_arguments)]
-fn depthwise3x3_portable(
-    x: &[i8],
-    xs: Shape,
-    stride: usize,
-    w: &[i8],
-    b: &[i32],
-    q: &ConvQuant<'_>,
-    out: &mut [i8],
-    os: Shape,
-    (lo, hi): (i32, i32),
-) {
-    let c = xs.c;
-    let zp = q.input_zero_point;
-    let out = &mut out[..os.len()];
-    let mut acc = [0i32; DW_BLOCK];
-    // the requantisers of up to 256 channels in lane form (6 KiB), when the vector form holds
-    let mut l8 = [Lanes8::new(&[]); DW_LANE_GROUPS];
-    let lanes =
-        (c <= 8 * DW_LANE_GROUPS && fits_requant_lanes(9 * 255 * 127, b, q.requant)).then(|| {
-            for (l, r) in l8.iter_mut().zip(q.requant.chunks(8)) {
-                *l = Lanes8::new(r);
-            }
-            &l8
-        });
-    for (oy, orow) in out.chunks_exact_mut(os.w * c).enumerate() {
-        let (ky0, ky1) = tap_range(oy, stride, 1, 3, xs.h);
-        for (ox, opix) in orow.chunks_exact_mut(c).enumerate() {
-            let (kx0, kx1) = tap_range(ox, stride, 1, 3, xs.w);
-            let mut c0 = 0;
-            while c0 < c {
-                let n = DW_BLOCK.min(c - c0);
-                let acc = &mut acc[..n];
-                acc.fill(0);
-                for ky in ky0..ky1 {
-                    let iy = oy * stride + ky - 1;
-                    for kx in kx0..kx1 {
-                        let ix = ox * stride + kx - 1;
-                        let xo = (iy * xs.w + ix) * c + c0;
-                        let wo = (ky * 3 + kx) * c + c0;
-                        for (a, (&xv, &wv)) in
-                            acc.iter_mut().zip(x[xo..xo + n].iter().zip(&w[wo..wo + n]))
-                        {
-                            *a += (xv as i32 - zp) * wv as i32;
-                        }
-                    }
-                }
-                if let Some(l8) = &lanes {
-                    // 8 channels at a time, branch-free (the biases cannot saturate here)
-                    for (j, (o, a)) in opix[c0..c0 + n].chunks_mut(8).zip(acc.chunks(8)).enumerate()
-                    {
-                        let ch = c0 + 8 * j;
-                        let v: [i32; 8] = core::array::from_fn(|t| {
-                            a.get(t).copied().unwrap_or(0) + b.get(ch + t).copied().unwrap_or(0)
-                        });
-                        let r = l8[ch / 8].requant(&v, q.output_zero_point, lo, hi);
-                        o.copy_from_slice(&r[..o.len()]);
-                    }
-                } else {
-                    for (((o, &a), &bias), rq) in opix[c0..c0 + n]
-                        .iter_mut()
-                        .zip(acc.iter())
-                        .zip(&b[c0..c0 + n])
-                        .zip(&q.requant[c0..c0 + n])
-                    {
-                        *o = rq.to_i8(a.saturating_add(bias), q.output_zero_point, lo, hi);
-                    }
-                }
-                c0 += n;
-            }
-        }
-    }
 }
 
 /// Output channels per block of the packed 1×1 weights.
@@ -524,10 +359,10 @@ pub fn pointwise_reference(
 }
 
 /// Pointwise 1×1 conv, fast: an int8 GEMM `out[p][co] = Σ_ci (x[p][ci] − zp)·w[co][ci]` with
-/// `i32` accumulation over the packed weights. On x86-64 with AVX2 it is `nn::simd`'s
-/// register-tiled kernel (AVX-512 VNNI where the CPU has it) with vectorised requantisation;
-/// elsewhere (and for accumulators too large for the vector requantisation) the portable
-/// kernel below.
+/// `i32` accumulation over the packed weights, the same integers as [`pointwise_reference`],
+/// from the kernel `nn::dispatch` picks — on x86-64 with AVX2 `nn::x86::pointwise`'s
+/// register-tiled GEMM (AVX-512 VNNI where the CPU has it) with vectorised requantisation,
+/// else `nn::portable::pointwise`.
 pub fn pointwise_fast(
     x: &[i8],
     xs: Shape,
@@ -537,141 +372,17 @@ pub fn pointwise_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     let os = check_pointwise(x, xs, w, b, q, out)?;
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-    if simd_allowed() && fits_simd_requant(xs.c as i64 * 255 * 127, b, q.requant) {
-        let (lo, _) = clamp_range(q.output_zero_point, q.relu);
-        let a = super::simd::Pw {
-            x,
-            p: xs.h * xs.w,
-            k: xs.c,
-            w,
-            bias: b,
-            requant: q.requant,
-            zp: q.input_zero_point,
-            zo: q.output_zero_point,
-            lo,
-        };
-        super::simd::pointwise(&a, out);
-        return Ok(os);
-    }
-    pointwise_portable(x, xs, w, b, q, out);
+    dispatch::pointwise(x, xs, w, b, q, out);
     Ok(os)
-}
-
-/// Longest input row the portable pointwise kernel stages as `i32` (4 KiB of stack); wider
-/// rows are staged and summed in pieces.
-const PW_STAGE: usize = 1024;
-
-/// The portable GEMM. Per 8-channel block the packed panel is unpacked once into 8 plain
-/// weight rows (stack, up to 1024 inputs each); per pixel the input row is staged as `i16`
-/// minus the zero point and multiplied with four weight rows at a time in one zipped loop (the
-/// shape of loop the auto-vectoriser turns into `pmaddwd` / `smlal`), then the block is
-/// requantised 8 lanes at a time ([`Lanes8`], branch-free). Rows wider than 1024 take
-/// [`pointwise_portable_wide`].
-fn pointwise_portable(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i8]) {
-    let ci = xs.c;
-    if ci > PW_STAGE {
-        return pointwise_portable_wide(x, xs, w, b, q, out);
-    }
-    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
-    let co = b.len();
-    let zp = q.input_zero_point;
-    let zo = q.output_zero_point;
-    let lanes = PW_BLOCK * PW_GROUP;
-    let panel = ci.div_ceil(PW_GROUP) * lanes;
-    let vector = fits_requant_lanes(ci as i64 * 255 * 127, b, q.requant);
-    let mut wt = [0i8; PW_BLOCK * PW_STAGE];
-    let mut st = [0i16; PW_STAGE];
-    let x = &x[..xs.len()];
-    for (block, wp) in w.chunks_exact(panel).enumerate() {
-        let k0 = block * PW_BLOCK;
-        let nb = (co - k0).min(PW_BLOCK);
-        // unpack: wt[j·ci + k] = w[k0 + j][k] (padding channels stay 0)
-        let wt = &mut wt[..PW_BLOCK * ci];
-        for (g, chunk) in wp.chunks_exact(lanes).enumerate() {
-            for (j, lane) in chunk.chunks_exact(PW_GROUP).enumerate() {
-                for (t, &v) in lane.iter().enumerate() {
-                    let k = g * PW_GROUP + t;
-                    if k < ci {
-                        wt[j * ci + k] = v;
-                    }
-                }
-            }
-        }
-        let lanes8 = Lanes8::new(&q.requant[k0..k0 + nb]);
-        let mut bias = [0i32; PW_BLOCK];
-        bias[..nb].copy_from_slice(&b[k0..k0 + nb]);
-        let (w0, w1) = wt.split_at(4 * ci);
-        for (p, xr) in x.chunks_exact(ci).enumerate() {
-            let st = &mut st[..ci];
-            for (s, &v) in st.iter_mut().zip(xr) {
-                *s = v as i16 - zp as i16;
-            }
-            let a = dot4(st, w0);
-            let c = dot4(st, w1);
-            let acc = [a[0], a[1], a[2], a[3], c[0], c[1], c[2], c[3]];
-            let ob = &mut out[p * co + k0..p * co + k0 + nb];
-            if vector {
-                let v = lanes8.requant(&core::array::from_fn(|j| acc[j] + bias[j]), zo, lo, hi);
-                ob.copy_from_slice(&v[..nb]);
-            } else {
-                for (t, o) in ob.iter_mut().enumerate() {
-                    *o = q.requant[k0 + t].to_i8(acc[t].saturating_add(bias[t]), zo, lo, hi);
-                }
-            }
-        }
-    }
-}
-
-/// Four dot products of one staged input row with four weight rows, in one zipped loop.
-/// `i16 × i8 → i32` with `|x − zp| ≤ 255` is what `pmaddwd` / `smlal` do, and LLVM finds them.
-#[inline]
-fn dot4(xr: &[i16], w4: &[i8]) -> [i32; 4] {
-    let ci = xr.len();
-    let (w0, r) = w4.split_at(ci);
-    let (w1, r) = r.split_at(ci);
-    let (w2, w3) = r.split_at(ci);
-    let (mut a0, mut a1, mut a2, mut a3) = (0i32, 0i32, 0i32, 0i32);
-    for ((((&xv, &v0), &v1), &v2), &v3) in xr.iter().zip(w0).zip(w1).zip(w2).zip(w3) {
-        let xv = xv as i32;
-        a0 += xv * v0 as i32;
-        a1 += xv * v1 as i32;
-        a2 += xv * v2 as i32;
-        a3 += xv * v3 as i32;
-    }
-    [a0, a1, a2, a3]
-}
-
-/// The portable GEMM for rows wider than the stage: one dot product per output, straight
-/// from the packed layout.
-fn pointwise_portable_wide(
-    x: &[i8],
-    xs: Shape,
-    w: &[i8],
-    b: &[i32],
-    q: &ConvQuant<'_>,
-    out: &mut [i8],
-) {
-    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
-    let ci = xs.c;
-    let co = b.len();
-    let zp = q.input_zero_point;
-    for (xr, orow) in x[..xs.len()].chunks_exact(ci).zip(out.chunks_exact_mut(co)) {
-        for (c, o) in orow.iter_mut().enumerate() {
-            let mut acc = 0i32;
-            for (k, &xv) in xr.iter().enumerate() {
-                acc += (xv as i32 - zp) * w[pointwise_packed_index(c, k, ci)] as i32;
-            }
-            *o = q.requant[c].to_i8(acc.saturating_add(b[c]), q.output_zero_point, lo, hi);
-        }
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::quant::portable;
-    use crate::nn::testutil::{max_diff, quantise, Rng};
+    use crate::nn::portable::pointwise::PW_STAGE;
+    use crate::nn::testutil::{kernel_equivalence, max_diff, quantise, KernelCase, Rng};
+    use std::format;
+    use std::string::String;
     use std::vec;
     use std::vec::Vec;
 
@@ -762,84 +473,6 @@ mod tests {
         out
     }
 
-    #[test]
-    fn conv2d_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0xc0);
-        for i in 0..400 {
-            // every 3rd case a 3x3 conv of a one-channel map (the first layer's SIMD kernel),
-            // with up to 40 output channels
-            let first = i % 3 == 0;
-            let c_in = if first { 1 } else { rng.usize(1, 5) };
-            // first-layer maps up to 45 wide: runs of 8 stride-2 pixels take 16-byte loads
-            let xs = Shape::new(c_in, rng.usize(1, 11), rng.usize(1, if first { 45 } else { 11 }));
-            let kernel = if first { (3, 3) } else { (rng.usize(1, 4), rng.usize(1, 4)) };
-            let p = Conv2dParams {
-                c_out: if first { rng.usize(1, 40) } else { rng.usize(1, 7) },
-                kernel,
-                stride: (rng.usize(1, 2), rng.usize(1, 2)),
-                pads: [
-                    rng.usize(0, kernel.0 - 1),
-                    rng.usize(0, kernel.1 - 1),
-                    rng.usize(0, kernel.0 - 1),
-                    rng.usize(0, kernel.1 - 1),
-                ],
-            };
-            let Ok(os) = p.output_shape(xs) else { continue };
-            let k = kernel.0 * kernel.1 * xs.c;
-            let x = rng.i8s(xs.len());
-            let w = rng.weights(p.c_out * k);
-            // every 10th case: huge biases (the scalar requantisation path)
-            let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };
-            let b: Vec<i32> = (0..p.c_out).map(|_| rng.int(-bmax, bmax) as i32).collect();
-            let q = rand_q(&mut rng, p.c_out, k);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            assert_eq!(conv2d_reference(&x, xs, &p, &w, &b, &q.conv(), &mut r), Ok(os));
-            assert_eq!(conv2d_fast(&x, xs, &p, &w, &b, &q.conv(), &mut f), Ok(os));
-            assert_eq!(r, f, "{xs:?} {p:?}");
-            let mut g = vec![2i8; os.len()];
-            portable(|| conv2d_fast(&x, xs, &p, &w, &b, &q.conv(), &mut g)).unwrap();
-            assert_eq!(r, g, "portable {xs:?} {p:?}");
-            if bmax > 20_000 {
-                continue;
-            }
-            let e =
-                float_conv(&x, xs, os, kernel, p.stride, (p.pads[0], p.pads[1]), false, &w, &b, &q);
-            assert!(max_diff(&r, &e) <= 1, "{xs:?} {p:?}");
-        }
-    }
-
-    #[test]
-    fn depthwise_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0xd3);
-        for i in 0..300 {
-            // channel counts straddle the 64-channel accumulator block and the 8-lane groups
-            let c = if i % 5 == 0 { rng.usize(60, 140) } else { rng.usize(1, 19) };
-            let xs = Shape::new(c, rng.usize(1, 12), rng.usize(1, 12));
-            let stride = rng.usize(1, 2);
-            let os = depthwise3x3_output_shape(xs, stride).unwrap();
-            let x = rng.i8s(xs.len());
-            let w = rng.weights(9 * c);
-            // every 10th case: huge biases (the scalar requantisation path)
-            let bmax = if i % 10 == 9 { 1 << 30 } else { 5000 };
-            let b: Vec<i32> = (0..c).map(|_| rng.int(-bmax, bmax) as i32).collect();
-            let q = rand_q(&mut rng, c, 9);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            assert_eq!(depthwise3x3_reference(&x, xs, stride, &w, &b, &q.conv(), &mut r), Ok(os));
-            assert_eq!(depthwise3x3_fast(&x, xs, stride, &w, &b, &q.conv(), &mut f), Ok(os));
-            assert_eq!(r, f, "{xs:?} {stride}");
-            let mut g = vec![2i8; os.len()];
-            portable(|| depthwise3x3_fast(&x, xs, stride, &w, &b, &q.conv(), &mut g)).unwrap();
-            assert_eq!(r, g, "portable {xs:?} {stride}");
-            if bmax > 5000 {
-                continue;
-            }
-            let e = float_conv(&x, xs, os, (3, 3), (stride, stride), (1, 1), true, &w, &b, &q);
-            assert!(max_diff(&r, &e) <= 1, "{xs:?} {stride}");
-        }
-    }
-
     /// Packs `O·I` weights for the pointwise kernels.
     fn packed(w: &[i8], c_out: usize, c_in: usize) -> Vec<i8> {
         let mut p = vec![0i8; pointwise_packed_len(c_out, c_in)];
@@ -847,34 +480,280 @@ mod tests {
         p
     }
 
-    /// Every SIMD path of the pointwise kernel on this machine, bit for bit against `r`.
-    #[allow(unused_variables)]
-    fn pointwise_simd_paths(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &Q, r: &[i8]) {
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-        {
-            let k = xs.c as i64;
-            if !crate::nn::quant::fits_simd_requant(k * 255 * 127, b, &q.rq) {
-                return;
-            }
-            let (lo, _) = clamp_range(q.zp_out, q.relu);
-            let a = crate::nn::simd::Pw {
-                x,
-                p: xs.h * xs.w,
-                k: xs.c,
-                w,
-                bias: b,
-                requant: &q.rq,
-                zp: q.zp_in,
-                zo: q.zp_out,
-                lo,
-            };
-            for vnni in [false, true] {
-                let mut f = vec![3i8; r.len()];
-                crate::nn::simd::pointwise_isa(&a, &mut f, vnni);
-                assert_eq!(f, r, "{xs:?} {} vnni {vnni}", b.len());
+    /// Random biases in `±bmax`.
+    fn biases(rng: &mut Rng, n: usize, bmax: i64) -> Vec<i32> {
+        (0..n).map(|_| rng.int(-bmax, bmax) as i32).collect()
+    }
+
+    /// A general conv case (OHWI weights); `float`: also check the reference against floats.
+    struct ConvCase {
+        x: Vec<i8>,
+        xs: Shape,
+        p: Conv2dParams,
+        os: Shape,
+        w: Vec<i8>,
+        b: Vec<i32>,
+        q: Q,
+        float: bool,
+    }
+
+    impl ConvCase {
+        /// Input, weights, biases in `±bmax` and quantisation drawn in that order.
+        fn new(rng: &mut Rng, xs: Shape, p: Conv2dParams, bmax: i64, float: bool) -> Option<Self> {
+            let os = p.output_shape(xs).ok()?;
+            let k = p.kernel.0 * p.kernel.1 * xs.c;
+            let x = rng.i8s(xs.len());
+            let w = rng.weights(p.c_out * k);
+            let b = biases(rng, p.c_out, bmax);
+            let q = rand_q(rng, p.c_out, k);
+            Some(Self { x, xs, p, os, w, b, q, float })
+        }
+    }
+
+    impl KernelCase for ConvCase {
+        fn out_shape(&self) -> Shape {
+            self.os
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            conv2d_reference(&self.x, self.xs, &self.p, &self.w, &self.b, &self.q.conv(), out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            conv2d_fast(&self.x, self.xs, &self.p, &self.w, &self.b, &self.q.conv(), out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} {:?}", self.xs, self.p)
+        }
+        fn check(&self, r: &[i8]) {
+            if self.float {
+                let (p, pads) = (&self.p, (self.p.pads[0], self.p.pads[1]));
+                let (x, w, b, q) = (&self.x, &self.w, &self.b, &self.q);
+                let e = float_conv(x, self.xs, self.os, p.kernel, p.stride, pads, false, w, b, q);
+                assert!(max_diff(r, &e) <= 1, "{}", self.describe());
             }
         }
     }
+
+    /// Random general-conv geometry for `kernel`: strides 1–2, each pad below the kernel.
+    fn rand_conv(rng: &mut Rng, c_out: usize, kernel: (usize, usize)) -> Conv2dParams {
+        Conv2dParams {
+            c_out,
+            kernel,
+            stride: (rng.usize(1, 2), rng.usize(1, 2)),
+            pads: [
+                rng.usize(0, kernel.0 - 1),
+                rng.usize(0, kernel.1 - 1),
+                rng.usize(0, kernel.0 - 1),
+                rng.usize(0, kernel.1 - 1),
+            ],
+        }
+    }
+
+    /// A depthwise 3×3 case; `float`: also check the reference against floats.
+    struct DwCase {
+        x: Vec<i8>,
+        xs: Shape,
+        stride: usize,
+        os: Shape,
+        w: Vec<i8>,
+        b: Vec<i32>,
+        q: Q,
+        float: bool,
+    }
+
+    impl DwCase {
+        /// Input, weights, biases in `±bmax` and quantisation drawn in that order.
+        fn new(rng: &mut Rng, xs: Shape, stride: usize, bmax: i64, float: bool) -> Self {
+            let os = depthwise3x3_output_shape(xs, stride).unwrap();
+            let x = rng.i8s(xs.len());
+            let w = rng.weights(9 * xs.c);
+            let b = biases(rng, xs.c, bmax);
+            let q = rand_q(rng, xs.c, 9);
+            Self { x, xs, stride, os, w, b, q, float }
+        }
+    }
+
+    impl KernelCase for DwCase {
+        fn out_shape(&self) -> Shape {
+            self.os
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            let (x, w, b, q) = (&self.x, &self.w, &self.b, self.q.conv());
+            depthwise3x3_reference(x, self.xs, self.stride, w, b, &q, out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            let (x, w, b, q) = (&self.x, &self.w, &self.b, self.q.conv());
+            depthwise3x3_fast(x, self.xs, self.stride, w, b, &q, out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} stride {}", self.xs, self.stride)
+        }
+        fn check(&self, r: &[i8]) {
+            if self.float {
+                let s = (self.stride, self.stride);
+                let (x, w, b, q) = (&self.x, &self.w, &self.b, &self.q);
+                let e = float_conv(x, self.xs, self.os, (3, 3), s, (1, 1), true, w, b, q);
+                assert!(max_diff(r, &e) <= 1, "{}", self.describe());
+            }
+        }
+    }
+
+    /// A pointwise case: `O·I` weights (for the float check) and their packed form.
+    struct PwCase {
+        x: Vec<i8>,
+        xs: Shape,
+        w: Vec<i8>,
+        wp: Vec<i8>,
+        b: Vec<i32>,
+        q: Q,
+        float: bool,
+    }
+
+    impl PwCase {
+        /// Input, weights, biases in `±bmax` and quantisation drawn in that order.
+        fn new(rng: &mut Rng, xs: Shape, c_out: usize, bmax: i64, float: bool) -> Self {
+            let x = rng.i8s(xs.len());
+            let w = rng.weights(c_out * xs.c);
+            let wp = packed(&w, c_out, xs.c);
+            let b = biases(rng, c_out, bmax);
+            let q = rand_q(rng, c_out, xs.c);
+            Self { x, xs, w, wp, b, q, float }
+        }
+    }
+
+    impl KernelCase for PwCase {
+        fn out_shape(&self) -> Shape {
+            Shape::new(self.b.len(), self.xs.h, self.xs.w)
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            pointwise_reference(&self.x, self.xs, &self.wp, &self.b, &self.q.conv(), out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            pointwise_fast(&self.x, self.xs, &self.wp, &self.b, &self.q.conv(), out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} -> {} channels", self.xs, self.b.len())
+        }
+        fn check(&self, r: &[i8]) {
+            if self.float {
+                let (x, w, b, q) = (&self.x, &self.w, &self.b, &self.q);
+                let os = self.out_shape();
+                let e = float_conv(x, self.xs, os, (1, 1), (1, 1), (0, 0), false, w, b, q);
+                assert!(max_diff(r, &e) <= 1, "{}", self.describe());
+            }
+        }
+    }
+
+    kernel_equivalence!(conv2d_fast_equals_reference_and_float, 0xc0, 400, |rng, i| {
+        // every 3rd case a 3x3 conv of a one-channel map (the first layer's x86 kernel), with
+        // up to 40 output channels
+        let first = i % 3 == 0;
+        let c_in = if first { 1 } else { rng.usize(1, 5) };
+        // first-layer maps up to 45 wide: runs of 8 stride-2 pixels take 16-byte loads
+        let xs = Shape::new(c_in, rng.usize(1, 11), rng.usize(1, if first { 45 } else { 11 }));
+        let kernel = if first { (3, 3) } else { (rng.usize(1, 4), rng.usize(1, 4)) };
+        let c_out = if first { rng.usize(1, 40) } else { rng.usize(1, 7) };
+        let p = rand_conv(rng, c_out, kernel);
+        // every 10th case: huge biases (the scalar requantisation path)
+        let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };
+        ConvCase::new(rng, xs, p, bmax, bmax <= 20_000)
+    });
+
+    kernel_equivalence!(depthwise_fast_equals_reference_and_float, 0xd3, 300, |rng, i| {
+        // channel counts straddle the 64-channel accumulator block and the 8-lane groups
+        let c = if i % 5 == 0 { rng.usize(60, 140) } else { rng.usize(1, 19) };
+        let xs = Shape::new(c, rng.usize(1, 12), rng.usize(1, 12));
+        let stride = rng.usize(1, 2);
+        // every 10th case: huge biases (the scalar requantisation path)
+        let bmax = if i % 10 == 9 { 1 << 30 } else { 5000 };
+        Some(DwCase::new(rng, xs, stride, bmax, bmax <= 5000))
+    });
+
+    kernel_equivalence!(pointwise_fast_equals_reference_and_float, 0x11, 300, |rng, i| {
+        // a few rows wider than the portable kernel's stage (and the x86 kernels' staged tiles)
+        let c_in =
+            if i % 50 == 0 { rng.usize(PW_STAGE - 2, PW_STAGE + 40) } else { rng.usize(1, 40) };
+        let xs = Shape::new(c_in, rng.usize(1, 7), rng.usize(1, 7));
+        let c_out = rng.usize(1, 40);
+        // every 10th case: huge biases (the scalar requantisation path)
+        let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };
+        Some(PwCase::new(rng, xs, c_out, bmax, bmax < 1 << 30))
+    });
+
+    /// The depthwise shapes of the 192×640 network (`benches/nn.rs`), channels as there, maps
+    /// smaller (odd and even sizes, for the stride-2 borders).
+    const DW_WORKLOAD: [(usize, usize); 8] =
+        [(128, 1), (148, 1), (32, 2), (48, 2), (64, 1), (64, 2), (96, 2), (96, 1)];
+    /// The maps of the workload-shape tests.
+    const WORKLOAD_MAPS: [(usize, usize); 3] = [(6, 20), (7, 13), (12, 40)];
+
+    kernel_equivalence!(depthwise_workload_shapes_are_bit_equal, 0xd4, 24, |rng, i| {
+        let (c, stride) = DW_WORKLOAD[i / 3];
+        let (h, w) = WORKLOAD_MAPS[i % 3];
+        Some(DwCase::new(rng, Shape::new(c, h, w), stride, 5000, false))
+    });
+
+    kernel_equivalence!(first_conv_workload_shapes_are_bit_equal, 0xd5, 3, |rng, i| {
+        // the first layer: 1 -> 32, 3x3, stride 2, pad 1 (192x640 in the network)
+        let (h, w) = [(12, 40), (13, 41), (24, 17)][i];
+        let p = Conv2dParams { c_out: 32, kernel: (3, 3), stride: (2, 2), pads: [1; 4] };
+        ConvCase::new(rng, Shape::new(1, h, w), p, 100_000, false)
+    });
+
+    /// The 1×1 shapes `(c_in, c_out)` of the 192×640 network (`benches/nn.rs`).
+    const PW_WORKLOAD: [(usize, usize); 16] = [
+        (128, 32),
+        (128, 11),
+        (128, 128),
+        (128, 148),
+        (148, 148),
+        (256, 64),
+        (256, 128),
+        (32, 48),
+        (384, 96),
+        (48, 64),
+        (592, 128),
+        (64, 64),
+        (64, 96),
+        (64, 128),
+        (96, 148),
+        (96, 96),
+    ];
+
+    kernel_equivalence!(pointwise_workload_shapes_are_bit_equal, 0x12, 16, |rng, i| {
+        // on smaller maps
+        let (c_in, c_out) = PW_WORKLOAD[i];
+        let xs = Shape::new(c_in, rng.usize(1, 6), rng.usize(1, 21));
+        Some(PwCase::new(rng, xs, c_out, 20_000, false))
+    });
+
+    kernel_equivalence!(depthwise_wide_layers_are_bit_equal, 0xd6, 12, |rng, _| {
+        // more than 256 channels: several passes of the x86 kernel's group constants, and the
+        // portable kernel's scalar requantisation (its lane-form table holds 256 channels)
+        let xs = Shape::new(rng.usize(257, 300), rng.usize(1, 7), rng.usize(1, 9));
+        let stride = rng.usize(1, 2);
+        Some(DwCase::new(rng, xs, stride, 5000, true))
+    });
+
+    kernel_equivalence!(first_conv_many_channels_are_bit_equal, 0xc1, 30, |rng, _| {
+        // more than 64 output channels: several passes of the x86 kernel's 8 groups; rows up
+        // to 60 wide for several runs of 8 stride-2 pixels
+        let xs = Shape::new(1, rng.usize(1, 12), rng.usize(1, 60));
+        let c_out = rng.usize(41, 80);
+        let p = rand_conv(rng, c_out, (3, 3));
+        ConvCase::new(rng, xs, p, 20_000, true)
+    });
+
+    kernel_equivalence!(pointwise_wide_layers_are_bit_equal, 0x13, 12, |rng, i| {
+        // more than 256 output channels (several passes of the AVX2 kernel's 32 blocks), or
+        // rows wider than every staged tile (the unstaged x86 paths, the portable wide path)
+        let (c_in, c_out) = if i % 2 == 0 {
+            (rng.usize(1, 40), rng.usize(257, 300))
+        } else {
+            (rng.usize(PW_STAGE + 1, PW_STAGE + 80), rng.usize(1, 30))
+        };
+        let xs = Shape::new(c_in, rng.usize(1, 4), rng.usize(1, 9));
+        Some(PwCase::new(rng, xs, c_out, 20_000, true))
+    });
 
     #[test]
     fn pointwise_packing_round_trips() {
@@ -905,119 +784,6 @@ mod tests {
             pack_pointwise(&[0; 5], 2, 3, &mut [0; 32]),
             Err(NnError::ParamLength { need: 6, got: 5 })
         );
-    }
-
-    #[test]
-    fn pointwise_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0x11);
-        for i in 0..300 {
-            // a few rows wider than the portable kernel's stage
-            let c_in =
-                if i % 50 == 0 { rng.usize(PW_STAGE - 2, PW_STAGE + 40) } else { rng.usize(1, 40) };
-            let xs = Shape::new(c_in, rng.usize(1, 7), rng.usize(1, 7));
-            let c_out = rng.usize(1, 40);
-            let x = rng.i8s(xs.len());
-            let w = rng.weights(c_out * xs.c);
-            let wp = packed(&w, c_out, xs.c);
-            // every 10th case: huge biases (the scalar requantisation path)
-            let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };
-            let b: Vec<i32> = (0..c_out).map(|_| rng.int(-bmax, bmax) as i32).collect();
-            let q = rand_q(&mut rng, c_out, xs.c);
-            let os = Shape::new(c_out, xs.h, xs.w);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            assert_eq!(pointwise_reference(&x, xs, &wp, &b, &q.conv(), &mut r), Ok(os));
-            assert_eq!(pointwise_fast(&x, xs, &wp, &b, &q.conv(), &mut f), Ok(os));
-            assert_eq!(r, f, "{xs:?} {c_out}");
-            let mut p = vec![1i8; os.len()];
-            pointwise_portable(&x, xs, &wp, &b, &q.conv(), &mut p);
-            assert_eq!(r, p, "portable {xs:?} {c_out}");
-            pointwise_simd_paths(&x, xs, &wp, &b, &q, &r);
-            if bmax < 1 << 30 {
-                let e = float_conv(&x, xs, os, (1, 1), (1, 1), (0, 0), false, &w, &b, &q);
-                assert!(max_diff(&r, &e) <= 1, "{xs:?} {c_out}");
-            }
-        }
-    }
-
-    /// The depthwise and first-conv shapes of the 192×640 network (`benches/nn.rs`), channels
-    /// as there, maps smaller (odd and even sizes, for the stride-2 borders).
-    #[test]
-    fn depthwise_and_first_conv_workload_shapes_are_bit_equal() {
-        let mut rng = Rng::new(0xd4);
-        for (c, stride) in
-            [(128, 1), (148, 1), (32, 2), (48, 2), (64, 1), (64, 2), (96, 2), (96, 1)]
-        {
-            for (h, w) in [(6, 20), (7, 13), (12, 40)] {
-                let xs = Shape::new(c, h, w);
-                let os = depthwise3x3_output_shape(xs, stride).unwrap();
-                let x = rng.i8s(xs.len());
-                let wt = rng.weights(9 * c);
-                let b: Vec<i32> = (0..c).map(|_| rng.int(-5000, 5000) as i32).collect();
-                let q = rand_q(&mut rng, c, 9);
-                let mut r = vec![0i8; os.len()];
-                let mut f = vec![1i8; os.len()];
-                let mut g = vec![2i8; os.len()];
-                depthwise3x3_reference(&x, xs, stride, &wt, &b, &q.conv(), &mut r).unwrap();
-                depthwise3x3_fast(&x, xs, stride, &wt, &b, &q.conv(), &mut f).unwrap();
-                portable(|| depthwise3x3_fast(&x, xs, stride, &wt, &b, &q.conv(), &mut g)).unwrap();
-                assert_eq!(r, f, "{xs:?} {stride}");
-                assert_eq!(r, g, "portable {xs:?} {stride}");
-            }
-        }
-        // the first layer: 1 -> 32, 3x3, stride 2, pad 1 (192x640 in the network)
-        for (h, w) in [(12, 40), (13, 41), (24, 17)] {
-            let xs = Shape::new(1, h, w);
-            let p = Conv2dParams { c_out: 32, kernel: (3, 3), stride: (2, 2), pads: [1; 4] };
-            let os = p.output_shape(xs).unwrap();
-            let x = rng.i8s(xs.len());
-            let wt = rng.weights(32 * 9);
-            let b: Vec<i32> = (0..32).map(|_| rng.int(-100_000, 100_000) as i32).collect();
-            let q = rand_q(&mut rng, 32, 9);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            conv2d_reference(&x, xs, &p, &wt, &b, &q.conv(), &mut r).unwrap();
-            conv2d_fast(&x, xs, &p, &wt, &b, &q.conv(), &mut f).unwrap();
-            assert_eq!(r, f, "{xs:?}");
-        }
-    }
-
-    /// The 1×1 shapes of the 192×640 network (`benches/nn.rs`), on smaller maps.
-    #[test]
-    fn pointwise_workload_shapes_are_bit_equal() {
-        let mut rng = Rng::new(0x12);
-        let shapes = [
-            (128, 32),
-            (128, 11),
-            (128, 128),
-            (128, 148),
-            (148, 148),
-            (256, 64),
-            (256, 128),
-            (32, 48),
-            (384, 96),
-            (48, 64),
-            (592, 128),
-            (64, 64),
-            (64, 96),
-            (64, 128),
-            (96, 148),
-            (96, 96),
-        ];
-        for (c_in, c_out) in shapes {
-            let xs = Shape::new(c_in, rng.usize(1, 6), rng.usize(1, 21));
-            let x = rng.i8s(xs.len());
-            let wp = packed(&rng.weights(c_out * c_in), c_out, c_in);
-            let b: Vec<i32> = (0..c_out).map(|_| rng.int(-20_000, 20_000) as i32).collect();
-            let q = rand_q(&mut rng, c_out, c_in);
-            let os = Shape::new(c_out, xs.h, xs.w);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            pointwise_reference(&x, xs, &wp, &b, &q.conv(), &mut r).unwrap();
-            pointwise_fast(&x, xs, &wp, &b, &q.conv(), &mut f).unwrap();
-            assert_eq!(r, f, "{xs:?} {c_out}");
-            pointwise_simd_paths(&x, xs, &wp, &b, &q, &r);
-        }
     }
 
     #[test]

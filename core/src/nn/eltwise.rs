@@ -17,10 +17,14 @@
 //!   parameters this is `max(x, zp)`. (After a `Conv` or `Add` the ReLU is fused into that op's
 //!   clamp instead: [`crate::nn::quant::clamp_range`].)
 //!
-//! The fast variants walk whole slices (`zip`, no indexing) and take the copy / `max` shortcut
-//! when a rescale is the identity; the tests require them to equal the index-by-index
-//! references bit for bit. No scratch memory.
+//! This file holds the ONNX definitions, the checks at entry and the `*_reference` kernels
+//! (index by index). The `*_fast` entries hand the checked operands to `nn::dispatch`: the
+//! portable kernels (`nn::portable::eltwise`) walk whole slices (`zip`, no indexing) and take
+//! the copy / `max` shortcut when a rescale is the identity; on x86-64 with AVX2 `Add` and the
+//! rescales of `Concat` run 8 lanes at a time (`nn::x86::eltwise`). The shared kernel tests
+//! require them to equal the references bit for bit. No scratch memory.
 
+use super::dispatch;
 use super::quant::{clamp_range, ADD_LEFT_SHIFT};
 use super::{check_tensor, check_zero_point, NnError, Requant, Shape};
 
@@ -91,8 +95,9 @@ impl AddQuant {
         }
     }
 
+    /// One output value of the add, clamped to `[lo, hi]`.
     #[inline]
-    fn add(&self, a: i8, b: i8, lo: i32, hi: i32) -> i8 {
+    pub(crate) fn add(&self, a: i8, b: i8, lo: i32, hi: i32) -> i8 {
         let a = self.requant1.apply((a as i32 - self.zero_point1) << ADD_LEFT_SHIFT);
         let b = self.requant2.apply((b as i32 - self.zero_point2) << ADD_LEFT_SHIFT);
         self.output.to_i8(a.saturating_add(b), self.output_zero_point, lo, hi)
@@ -128,8 +133,8 @@ pub fn add_reference(
     Ok(shape)
 }
 
-/// `Add`, fast: one zipped pass over the three slices; on x86-64 with AVX2 the three
-/// requantisations run on 8 lanes at a time (`nn::simd`).
+/// `Add`, fast: the same integers as [`add_reference`]; one zipped pass over the three slices,
+/// or on x86-64 with AVX2 the three requantisations on 8 lanes at a time (`nn::x86::eltwise`).
 pub fn add_fast(
     a: &[i8],
     b: &[i8],
@@ -138,35 +143,7 @@ pub fn add_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     check_add(a, b, shape, q, out)?;
-    let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
-    let n = shape.len();
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-    {
-        use super::quant::fits_simd_requant;
-        let x = 255i64 << ADD_LEFT_SHIFT;
-        let left = q.requant1.shift.max(q.requant2.shift).clamp(0, 30);
-        if super::quant::simd_allowed()
-            && q.requant1.shift <= 0
-            && q.requant2.shift <= 0
-            && fits_simd_requant(x, &[], &[q.requant1, q.requant2])
-            && fits_simd_requant(2 * (x << left) + 2, &[], &[q.output])
-        {
-            let op = super::simd::AddOp {
-                a: &a[..n],
-                b: &b[..n],
-                zp: (q.zero_point1, q.zero_point2),
-                rq: (q.requant1, q.requant2),
-                out_rq: q.output,
-                zo: q.output_zero_point,
-                lo,
-            };
-            super::simd::add(&op, &mut out[..n]);
-            return Ok(shape);
-        }
-    }
-    for ((o, &x), &y) in out[..n].iter_mut().zip(&a[..n]).zip(&b[..n]) {
-        *o = q.add(x, y, lo, hi);
-    }
+    dispatch::add(a, b, shape, q, out);
     Ok(shape)
 }
 
@@ -219,46 +196,15 @@ pub fn concat_reference(inputs: &[ConcatInput<'_>], out: &mut [i8]) -> Result<Sh
     Ok(os)
 }
 
-/// `Concat` along channels, fast: per pixel, each input's channel run is copied (identity
-/// rescale) or rescaled as one slice (8 lanes at a time on x86-64 with AVX2).
+/// `Concat` along channels, fast: the same integers as [`concat_reference`]; per pixel, each
+/// input's channel run is copied (identity rescale) or rescaled as one slice (8 lanes at a time
+/// on x86-64 with AVX2).
 pub fn concat_fast(inputs: &[ConcatInput<'_>], out: &mut [i8]) -> Result<Shape, NnError> {
     let os = check_concat(inputs, out)?;
     let mut c0 = 0;
     for i in inputs {
-        let ci = i.shape.c;
-        let src = i.data[..i.shape.len()].chunks_exact(ci);
-        let dst = out[..os.len()].chunks_exact_mut(os.c);
-        #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-        let simd = super::quant::simd_allowed()
-            && !i.rescale.is_identity()
-            && super::quant::fits_simd_requant(255, &[], &[i.rescale.requant]);
-        #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
-        let simd = false;
-        if i.rescale.is_identity() {
-            for (d, s) in dst.zip(src) {
-                d[c0..c0 + ci].copy_from_slice(s);
-            }
-        } else if simd {
-            #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-            {
-                let op = super::simd::RescaleOp {
-                    x: &i.data[..i.shape.len()],
-                    c: ci,
-                    stride: os.c,
-                    zp: i.rescale.input_zero_point,
-                    zo: i.rescale.output_zero_point,
-                    requant: i.rescale.requant,
-                };
-                super::simd::rescale_into(&op, os.h * os.w, &mut out[c0..os.len()]);
-            }
-        } else {
-            for (d, s) in dst.zip(src) {
-                for (o, &v) in d[c0..c0 + ci].iter_mut().zip(s) {
-                    *o = i.rescale.apply(v, -128, 127);
-                }
-            }
-        }
-        c0 += ci;
+        dispatch::concat_input(i, c0, os, out);
+        c0 += i.shape.c;
     }
     Ok(os)
 }
@@ -285,31 +231,22 @@ pub fn relu_reference(
     Ok(shape)
 }
 
-/// Standalone `Relu`, fast: `max(x, zp)` when the rescale is the identity.
+/// Standalone `Relu`, fast: the same integers as [`relu_reference`]; `max(x, zp)` when the
+/// rescale is the identity.
 pub fn relu_fast(x: &[i8], shape: Shape, r: &Rescale, out: &mut [i8]) -> Result<Shape, NnError> {
     check_tensor(x.len(), shape)?;
     check_zero_point(r.input_zero_point)?;
     check_tensor(out.len(), shape)?;
-    let (lo, hi) = clamp_range(r.output_zero_point, true);
-    let n = shape.len();
-    if r.is_identity() {
-        let zp = lo as i8;
-        for (o, &v) in out[..n].iter_mut().zip(&x[..n]) {
-            *o = v.max(zp);
-        }
-    } else {
-        for (o, &v) in out[..n].iter_mut().zip(&x[..n]) {
-            *o = r.apply(v, lo, hi);
-        }
-    }
+    dispatch::relu(x, shape, r, out);
     Ok(shape)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::quant::portable;
-    use crate::nn::testutil::{max_diff, quantise, Rng};
+    use crate::nn::testutil::{kernel_equivalence, max_diff, quantise, KernelCase, Rng};
+    use std::format;
+    use std::string::String;
     use std::vec;
     use std::vec::Vec;
 
@@ -317,43 +254,67 @@ mod tests {
         Shape::new(rng.usize(1, 9), rng.usize(1, 9), rng.usize(1, 9))
     }
 
-    #[test]
-    fn add_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0xadd);
-        for i in 0..300 {
-            // every 4th a shape of the network (148, 96, 64 or 128 channels; lane tails)
-            let s = if i % 4 == 0 {
-                let c = [148, 96, 64, 128][i / 4 % 4];
-                Shape::new(c, rng.usize(1, 6), rng.usize(1, 20))
-            } else {
-                rand_shape(&mut rng)
-            };
-            let a = rng.i8s(s.len());
-            let b = rng.i8s(s.len());
-            let (s1, s2) = (rng.f64(0.002, 0.1), rng.f64(0.002, 0.1));
-            let s_out = (s1 + s2) * rng.f64(0.5, 1.5);
-            let (zp1, zp2, zpo) = (rng.zp(), rng.zp(), rng.zp());
-            let relu = rng.int(0, 1) == 1;
-            let q = AddQuant::new(s1, zp1, s2, zp2, s_out, zpo, relu);
-            let mut r = vec![0i8; s.len()];
-            let mut f = vec![1i8; s.len()];
-            assert_eq!(add_reference(&a, &b, s, &q, &mut r), Ok(s));
-            assert_eq!(add_fast(&a, &b, s, &q, &mut f), Ok(s));
-            assert_eq!(r, f);
-            let mut g = vec![2i8; s.len()];
-            portable(|| add_fast(&a, &b, s, &q, &mut g)).unwrap();
-            assert_eq!(r, g);
-            let (lo, hi) = clamp_range(zpo, relu);
-            let e: Vec<i32> = a
+    /// An `Add` case with the scales it was quantised from (for the float check).
+    struct AddCase {
+        a: Vec<i8>,
+        b: Vec<i8>,
+        s: Shape,
+        q: AddQuant,
+        scales: (f64, f64, f64),
+        relu: bool,
+    }
+
+    impl KernelCase for AddCase {
+        fn out_shape(&self) -> Shape {
+            self.s
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            add_reference(&self.a, &self.b, self.s, &self.q, out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            add_fast(&self.a, &self.b, self.s, &self.q, out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} {:?}", self.s, self.q)
+        }
+        fn check(&self, r: &[i8]) {
+            let (s1, s2, s_out) = self.scales;
+            let (zp1, zp2, zpo) =
+                (self.q.zero_point1, self.q.zero_point2, self.q.output_zero_point);
+            let (lo, hi) = clamp_range(zpo, self.relu);
+            let e: Vec<i32> = self
+                .a
                 .iter()
-                .zip(&b)
+                .zip(&self.b)
                 .map(|(&x, &y)| {
                     let v = (x as i32 - zp1) as f64 * s1 + (y as i32 - zp2) as f64 * s2;
-                    quantise(if relu { v.max(0.0) } else { v }, s_out, zpo, lo, hi)
+                    quantise(if self.relu { v.max(0.0) } else { v }, s_out, zpo, lo, hi)
                 })
                 .collect();
-            assert!(max_diff(&r, &e) <= 1);
+            assert!(max_diff(r, &e) <= 1, "{}", self.describe());
         }
+    }
+
+    kernel_equivalence!(add_fast_equals_reference_and_float, 0xadd, 300, |rng, i| {
+        // every 4th a shape of the network (148, 96, 64 or 128 channels; lane tails)
+        let s = if i % 4 == 0 {
+            let c = [148, 96, 64, 128][i / 4 % 4];
+            Shape::new(c, rng.usize(1, 6), rng.usize(1, 20))
+        } else {
+            rand_shape(rng)
+        };
+        let a = rng.i8s(s.len());
+        let b = rng.i8s(s.len());
+        let (s1, s2) = (rng.f64(0.002, 0.1), rng.f64(0.002, 0.1));
+        let s_out = (s1 + s2) * rng.f64(0.5, 1.5);
+        let (zp1, zp2, zpo) = (rng.zp(), rng.zp(), rng.zp());
+        let relu = rng.int(0, 1) == 1;
+        let q = AddQuant::new(s1, zp1, s2, zp2, s_out, zpo, relu);
+        Some(AddCase { a, b, s, q, scales: (s1, s2, s_out), relu })
+    });
+
+    #[test]
+    fn add_bad_operands_are_errors() {
         let s = Shape::new(2, 2, 2);
         let bad = AddQuant::new(0.1, 200, 0.1, 0, 0.1, 0, false);
         assert_eq!(add_reference(&[0; 8], &[0; 8], s, &bad, &mut [0; 8]), Err(NnError::BadParam));
@@ -364,61 +325,85 @@ mod tests {
         );
     }
 
-    #[test]
-    fn concat_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0xcc);
-        for _ in 0..300 {
-            let (h, w) = (rng.usize(1, 8), rng.usize(1, 8));
-            let n = rng.usize(1, 4);
-            let s_out = rng.f64(0.01, 0.1);
-            let zpo = rng.zp();
-            let mut parts = Vec::new();
-            for _ in 0..n {
-                // channel counts of the network's concats now and then (lane tails: 148)
-                let c = if rng.int(0, 3) == 0 {
-                    [148, 96, 64, 32, 128][rng.usize(0, 4)]
-                } else {
-                    rng.usize(1, 12)
-                };
-                let shape = Shape::new(c, h, w);
-                // half of the inputs share the output's parameters (the copy path)
-                let (s, zp) =
-                    if rng.int(0, 1) == 1 { (s_out, zpo) } else { (rng.f64(0.005, 0.2), rng.zp()) };
-                parts.push((rng.i8s(shape.len()), shape, s, zp));
-            }
-            let inputs: Vec<ConcatInput<'_>> = parts
+    /// A channel `Concat` case: each part's data, shape, scale and zero point.
+    struct ConcatCase {
+        parts: Vec<(Vec<i8>, Shape, f64, i32)>,
+        s_out: f64,
+        zpo: i32,
+    }
+
+    impl ConcatCase {
+        fn inputs(&self) -> Vec<ConcatInput<'_>> {
+            self.parts
                 .iter()
                 .map(|(d, shape, s, zp)| ConcatInput {
                     data: d,
                     shape: *shape,
-                    rescale: Rescale::new(*s, *zp, s_out, zpo),
+                    rescale: Rescale::new(*s, *zp, self.s_out, self.zpo),
                 })
-                .collect();
-            let c: usize = parts.iter().map(|p| p.1.c).sum();
-            let os = Shape::new(c, h, w);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            assert_eq!(concat_reference(&inputs, &mut r), Ok(os));
-            assert_eq!(concat_fast(&inputs, &mut f), Ok(os));
-            assert_eq!(r, f);
-            let mut g = vec![2i8; os.len()];
-            portable(|| concat_fast(&inputs, &mut g)).unwrap();
-            assert_eq!(r, g);
+                .collect()
+        }
+    }
+
+    impl KernelCase for ConcatCase {
+        fn out_shape(&self) -> Shape {
+            let (h, w) = (self.parts[0].1.h, self.parts[0].1.w);
+            Shape::new(self.parts.iter().map(|p| p.1.c).sum(), h, w)
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            concat_reference(&self.inputs(), out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            concat_fast(&self.inputs(), out)
+        }
+        fn describe(&self) -> String {
+            let parts: Vec<_> = self.parts.iter().map(|p| (p.1, p.2, p.3)).collect();
+            format!("{parts:?} -> ({}, {})", self.s_out, self.zpo)
+        }
+        fn check(&self, r: &[i8]) {
+            let os = self.out_shape();
             let mut e = vec![0i32; os.len()];
-            for y in 0..h {
-                for x in 0..w {
+            for y in 0..os.h {
+                for x in 0..os.w {
                     let mut c0 = 0;
-                    for (d, shape, s, zp) in &parts {
+                    for (d, shape, s, zp) in &self.parts {
                         for ch in 0..shape.c {
                             let v = (d[shape.index(ch, y, x)] as i32 - zp) as f64 * s;
-                            e[os.index(c0 + ch, y, x)] = quantise(v, s_out, zpo, -128, 127);
+                            e[os.index(c0 + ch, y, x)] =
+                                quantise(v, self.s_out, self.zpo, -128, 127);
                         }
                         c0 += shape.c;
                     }
                 }
             }
-            assert!(max_diff(&r, &e) <= 1);
+            assert!(max_diff(r, &e) <= 1, "{}", self.describe());
         }
+    }
+
+    kernel_equivalence!(concat_fast_equals_reference_and_float, 0xcc, 300, |rng, _| {
+        let (h, w) = (rng.usize(1, 8), rng.usize(1, 8));
+        let n = rng.usize(1, 4);
+        let s_out = rng.f64(0.01, 0.1);
+        let zpo = rng.zp();
+        let mut parts = Vec::new();
+        for _ in 0..n {
+            // channel counts of the network's concats now and then (lane tails: 148)
+            let c = if rng.int(0, 3) == 0 {
+                [148, 96, 64, 32, 128][rng.usize(0, 4)]
+            } else {
+                rng.usize(1, 12)
+            };
+            let shape = Shape::new(c, h, w);
+            // half of the inputs share the output's parameters (the copy path)
+            let (s, zp) =
+                if rng.int(0, 1) == 1 { (s_out, zpo) } else { (rng.f64(0.005, 0.2), rng.zp()) };
+            parts.push((rng.i8s(shape.len()), shape, s, zp));
+        }
+        Some(ConcatCase { parts, s_out, zpo })
+    });
+
+    #[test]
+    fn concat_bad_inputs_are_errors() {
         let a = [0i8; 8];
         let r = Rescale::new(1.0, 0, 1.0, 0);
         let bad = [
@@ -429,30 +414,51 @@ mod tests {
         assert_eq!(concat_fast(&[], &mut [0; 16]), Err(NnError::BadParam));
     }
 
-    #[test]
-    fn relu_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0x7e1);
-        for i in 0..200 {
-            let s = rand_shape(&mut rng);
-            let x = rng.i8s(s.len());
-            let (s_in, zp_in) = (rng.f64(0.005, 0.1), rng.zp());
-            let (s_out, zp_out) =
-                if i % 2 == 0 { (s_in, zp_in) } else { (rng.f64(0.005, 0.1), rng.zp()) };
-            let rs = Rescale::new(s_in, zp_in, s_out, zp_out);
-            assert_eq!(rs.is_identity(), i % 2 == 0);
-            let mut r = vec![0i8; s.len()];
-            let mut f = vec![1i8; s.len()];
-            assert_eq!(relu_reference(&x, s, &rs, &mut r), Ok(s));
-            assert_eq!(relu_fast(&x, s, &rs, &mut f), Ok(s));
-            assert_eq!(r, f);
+    /// A standalone `Relu` case with its scales (for the float check).
+    struct ReluCase {
+        x: Vec<i8>,
+        s: Shape,
+        rs: Rescale,
+        scales: (f64, f64),
+    }
+
+    impl KernelCase for ReluCase {
+        fn out_shape(&self) -> Shape {
+            self.s
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            relu_reference(&self.x, self.s, &self.rs, out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            relu_fast(&self.x, self.s, &self.rs, out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} {:?}", self.s, self.rs)
+        }
+        fn check(&self, r: &[i8]) {
+            let (s_in, s_out) = self.scales;
+            let (zp_in, zp_out) = (self.rs.input_zero_point, self.rs.output_zero_point);
             let (lo, hi) = clamp_range(zp_out, true);
-            let e: Vec<i32> = x
+            let e: Vec<i32> = self
+                .x
                 .iter()
                 .map(|&v| {
                     quantise(((v as i32 - zp_in) as f64 * s_in).max(0.0), s_out, zp_out, lo, hi)
                 })
                 .collect();
-            assert!(max_diff(&r, &e) <= 1);
+            assert!(max_diff(r, &e) <= 1, "{}", self.describe());
         }
     }
+
+    kernel_equivalence!(relu_fast_equals_reference_and_float, 0x7e1, 200, |rng, i| {
+        let s = rand_shape(rng);
+        let x = rng.i8s(s.len());
+        let (s_in, zp_in) = (rng.f64(0.005, 0.1), rng.zp());
+        // every other case an identity rescale (the `max` path)
+        let (s_out, zp_out) =
+            if i % 2 == 0 { (s_in, zp_in) } else { (rng.f64(0.005, 0.1), rng.zp()) };
+        let rs = Rescale::new(s_in, zp_in, s_out, zp_out);
+        assert_eq!(rs.is_identity(), i % 2 == 0);
+        Some(ReluCase { x, s, rs, scales: (s_in, s_out) })
+    });
 }

@@ -392,6 +392,7 @@ pub fn labels_to_frame(labels: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<
 
 #[cfg(test)]
 mod tests {
+    use super::super::dispatch::for_each_level;
     use super::super::model::{encoded_len, plan_arena, write, ConvGeometry, TensorSpec};
     use super::super::testutil::Rng;
     use super::super::Requant;
@@ -501,11 +502,15 @@ mod tests {
             let m = Model::parse(bytes).unwrap();
             assert_eq!(m.n_ops(), 10);
             let input: Vec<u8> = (0..h * w).map(|_| rng.int(0, 255) as u8).collect();
-            let mut a1 = vec![0i8; m.arena_len()];
             let mut a2 = vec![0i8; m.arena_len()];
-            let o1 = run(&m, &input, &mut a1, Kernels::Fast).unwrap().to_vec();
             let o2 = run(&m, &input, &mut a2, Kernels::Reference).unwrap().to_vec();
-            assert_eq!(o1, o2, "case {case} {h}x{w}");
+            // the fast kernels at every instruction-set level of this CPU
+            let mut o1 = Vec::new();
+            for_each_level(|level| {
+                let mut a1 = vec![0i8; m.arena_len()];
+                o1 = run(&m, &input, &mut a1, Kernels::Fast).unwrap().to_vec();
+                assert_eq!(o1, o2, "{level}, case {case} {h}x{w}");
+            });
             assert_eq!(o1.len(), 5 * h * w);
             // not a constant output
             assert!(o1.iter().any(|&v| v != o1[0]), "case {case}");

@@ -8,18 +8,28 @@
 //!
 //! Every operator exists twice, as tract does it: a `*_reference` kernel written as plain loops
 //! that read like the ONNX operator definition, and a `*_fast` kernel that restructures the same
-//! integer arithmetic. The fast kernels have a portable form, written for the compiler's
-//! auto-vectoriser (contiguous row slices, hoisted bounds, `chunks_exact`), and on x86-64 with
-//! AVX2 (the workspace builds hosts for x86-64-v3) an intrinsics form in `simd` (AVX-512 VNNI
-//! for the 1×1 GEMM where the CPU has it, found at run time). One shared test per op runs the
-//! reference and every fast form on random shapes (and the network's shapes) and requires them
-//! to be **bit-equal**, and checks the dequantised result against a float computation.
+//! integer arithmetic. Each op file below holds the definition, the checks at entry and the
+//! reference; its `*_fast` entry checks the operands the same way and calls the op family's one
+//! function in `dispatch`, which picks the kernel (the one place a run-time CPU-feature check
+//! would go):
+//! - `portable/`, one file per op family: safe Rust written for the compiler's auto-vectoriser
+//!   (contiguous row slices, hoisted bounds, `chunks_exact`); the code of every target.
+//! - `x86/`, one file per op family (`pointwise`, `depthwise`, `conv1`, `resize`,
+//!   `eltwise`): AVX2 intrinsics on x86-64 (the workspace builds hosts for x86-64-v3), AVX-512
+//!   VNNI for the 1×1 GEMM where the CPU has it, found at run time. The only `unsafe` of the
+//!   crate. An `arm64/` family would sit beside it.
+//!
+//! One shared test macro (`kernel_equivalence!`, in `testutil`) runs, per op family, the
+//! reference and the fast kernel at every instruction-set level this CPU has on seeded random
+//! shapes (and the network's shapes) and requires them to be **bit-equal**; the op files'
+//! tests add a check of the dequantised result against a float computation.
 //!
 //! - [`quant`]: [`Requant`] (Q0.31 multiplier + shift, gemmlowp/TFLite rounding).
 //! - [`conv`]: general `k×k` conv, depthwise 3×3 (stride 1/2, pad 1), pointwise 1×1 (int8 GEMM).
 //! - [`eltwise`]: `Add` (TFLite scheme, left shift 20), `Concat` along channels, `Relu`.
 //! - [`pool`]: the PPM's `AveragePool` (window = stride, bottom/right pad, divide by real pixels).
 //! - [`resize`]: bilinear `Resize`, `half_pixel`, with fixed-point weights.
+//! - [`model`], [`graph`]: the blob parser with its arena plan, and the graph executor.
 //!
 //! **Rounding.** All requantisation is integer: `acc · M · 2^shift` with `M` a Q0.31 multiplier,
 //! rounded as gemmlowp's `SaturatingRoundingDoublingHighMul` (nearest, ties toward +∞ — the
@@ -43,13 +53,13 @@
 //! stores that layout (`model::VERSION` 2), so nothing is repacked at run time.
 //!
 //! **Memory.** No kernel allocates: inputs, weights and outputs are caller-provided slices. The
-//! only scratch is on the stack and fixed. Portable kernels: a 64-entry `i32` accumulator block
-//! (pool: 256 B; depthwise: plus lane-form requantisers, 6.3 KiB) and an unpacked weight panel
-//! with a staged `i16` row (pointwise: 10 KiB). The x86 kernels (hosts only): 8 KiB staged
-//! input tile (VNNI GEMM), 12 + 7 KiB (AVX2 GEMM), 21 KiB of per-group constants (depthwise),
-//! 16 KiB of staged row chunks and 24 KiB of column taps (resize), 3 KiB (first conv). Shapes,
-//! slice lengths and zero points are checked once at entry and reported as [`NnError`]; the
-//! kernels do not panic on bad shapes or parameters.
+//! only scratch is on the stack and fixed; the references use none. Portable kernels: a
+//! 64-entry `i32` accumulator block (pool: 256 B; depthwise: plus lane-form requantisers,
+//! 6.3 KiB) and an unpacked weight panel with a staged `i16` row (pointwise: 10 KiB). The x86
+//! kernels (hosts only): 8 KiB staged input tile (VNNI GEMM), 12 + 7 KiB (AVX2 GEMM), 21 KiB of
+//! per-group constants (depthwise), 16 KiB of staged row chunks and 24 KiB of column taps
+//! (resize), 3 KiB (first conv). Shapes, slice lengths and zero points are checked once at entry
+//! and reported as [`NnError`]; the kernels do not panic on bad shapes or parameters.
 //!
 //! **Speed** — `cargo bench -p semloc-core --bench nn` (the 192×640 Res2Net frame, 373 MMAC,
 //! op by op and, with `SEMLOC_SLM`, the real graph through [`graph::run`]); one core of an AMD
@@ -75,14 +85,23 @@
 use core::fmt;
 
 pub mod conv;
+mod dispatch;
 pub mod eltwise;
 pub mod graph;
 pub mod model;
 pub mod pool;
+mod portable;
 pub mod quant;
 pub mod resize;
+#[cfg(test)]
+mod testutil;
 #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-pub mod simd;
+pub mod x86;
+
+/// The x86 instruction-set cap ([`x86::set_max_isa`], [`x86::Isa`]) under its former path, for
+/// the callers that name it (`tests/tests/segmentation.rs`).
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+pub use x86 as simd;
 
 pub use quant::Requant;
 
@@ -221,52 +240,5 @@ mod tests {
         assert!(NnError::BadParam.to_string().contains("unsupported"));
         assert_eq!(Shape::new(2, 3, 4).index(1, 2, 3), (2 * 4 + 3) * 2 + 1);
         assert!(Shape::new(0, 3, 4).is_empty());
-    }
-}
-
-#[cfg(test)]
-pub(crate) mod testutil {
-    //! Seeded random tensors and float helpers shared by the op tests.
-    use crate::ransac::XorShift64;
-    use std::vec::Vec;
-
-    /// A seeded generator with the helpers the op tests need.
-    pub struct Rng(pub XorShift64);
-
-    impl Rng {
-        pub fn new(seed: u64) -> Self {
-            Self(XorShift64::new(seed))
-        }
-        /// Uniform in `lo..=hi`.
-        pub fn int(&mut self, lo: i64, hi: i64) -> i64 {
-            lo + (self.0.next_u64() % (hi - lo + 1) as u64) as i64
-        }
-        pub fn usize(&mut self, lo: usize, hi: usize) -> usize {
-            self.int(lo as i64, hi as i64) as usize
-        }
-        /// Uniform in `[lo, hi)`.
-        pub fn f64(&mut self, lo: f64, hi: f64) -> f64 {
-            lo + (hi - lo) * ((self.0.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-        }
-        pub fn i8s(&mut self, n: usize) -> Vec<i8> {
-            (0..n).map(|_| self.int(-128, 127) as i8).collect()
-        }
-        /// Symmetric weights in `[-127, 127]`.
-        pub fn weights(&mut self, n: usize) -> Vec<i8> {
-            (0..n).map(|_| self.int(-127, 127) as i8).collect()
-        }
-        pub fn zp(&mut self) -> i32 {
-            self.int(-128, 127) as i32
-        }
-    }
-
-    /// `clamp(round_half_away(y / scale) + zp, lo, hi)`: what a float engine would store.
-    pub fn quantise(y: f64, scale: f64, zp: i32, lo: i32, hi: i32) -> i32 {
-        ((y / scale).round() as i64 + zp as i64).clamp(lo as i64, hi as i64) as i32
-    }
-
-    /// Largest `|a − b|` over two int8 tensors.
-    pub fn max_diff(a: &[i8], b: &[i32]) -> i32 {
-        a.iter().zip(b).map(|(&x, &y)| (x as i32 - y).abs()).max().unwrap_or(0)
     }
 }

@@ -14,9 +14,12 @@
 //! The mean is kept with 16 fractional bits before the one requantisation, so the only
 //! rounding that matters is the final one (the `2^-17` error of `avg` is far below an output
 //! step): the result is within one step of `round(mean_real / s_out) + zp_out`.
-//! The fast kernel accumulates a whole window row of channel vectors into a 64-channel stack
-//! block (256 bytes), which vectorises over channels; the reference loops per element.
+//! The reference loops per element (no scratch). [`avgpool_fast`] hands the checked operands to
+//! `nn::dispatch`, whose kernel on every target is `nn::portable::pool`: each real pixel of a
+//! window adds its channel vector to a 64-channel stack block (256 bytes), which vectorises
+//! over channels.
 
+use super::dispatch;
 use super::{check_tensor, check_zero_point, NnError, Requant, Shape};
 
 /// Fractional bits of the window mean before requantisation.
@@ -92,7 +95,7 @@ impl PoolQuant {
 
     /// The output value of a window with sum `sum` over `n > 0` real pixels.
     #[inline]
-    fn finish(&self, sum: i32, n: i32) -> i8 {
+    pub(crate) fn finish(&self, sum: i32, n: i32) -> i8 {
         let num = (sum as i64).abs() << AVG_FRAC_BITS;
         let d = n as i64;
         let avg = ((2 * num + d) / (2 * d)) as i32;
@@ -146,11 +149,8 @@ pub fn avgpool_reference(
     Ok(os)
 }
 
-/// Channels per accumulator block of the fast pool.
-const BLOCK: usize = 64;
-
-/// Average pool, fast: per window and 64-channel block, each real pixel adds its channel
-/// vector to a stack accumulator.
+/// Average pool, fast: the same integers as [`avgpool_reference`]; per window and 64-channel
+/// block, each real pixel adds its channel vector to a stack accumulator.
 pub fn avgpool_fast(
     x: &[i8],
     xs: Shape,
@@ -159,45 +159,18 @@ pub fn avgpool_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     let os = check_pool(x, xs, p, q, out)?;
-    let (kh, kw) = p.kernel;
-    let c = xs.c;
-    let zp = q.input_zero_point;
-    let mut acc = [0i32; BLOCK];
-    for oy in 0..os.h {
-        let (y0, y1) = (oy * kh, (oy * kh + kh).min(xs.h));
-        for ox in 0..os.w {
-            let (x0, x1) = (ox * kw, (ox * kw + kw).min(xs.w));
-            let n = ((y1 - y0) * (x1 - x0)) as i32;
-            let o = os.index(0, oy, ox);
-            let opix = &mut out[o..o + c];
-            let mut c0 = 0;
-            while c0 < c {
-                let nb = BLOCK.min(c - c0);
-                let acc = &mut acc[..nb];
-                acc.fill(0);
-                for iy in y0..y1 {
-                    for ix in x0..x1 {
-                        let i = xs.index(c0, iy, ix);
-                        for (a, &v) in acc.iter_mut().zip(&x[i..i + nb]) {
-                            *a += v as i32 - zp;
-                        }
-                    }
-                }
-                for (o, &a) in opix[c0..c0 + nb].iter_mut().zip(acc.iter()) {
-                    *o = q.finish(a, n);
-                }
-                c0 += nb;
-            }
-        }
-    }
+    dispatch::avgpool(x, xs, p, q, out, os);
     Ok(os)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::testutil::{max_diff, quantise, Rng};
+    use crate::nn::testutil::{kernel_equivalence, max_diff, quantise, KernelCase};
+    use std::format;
+    use std::string::String;
     use std::vec;
+    use std::vec::Vec;
 
     #[test]
     fn ppm_params_match_the_python_definition() {
@@ -211,31 +184,40 @@ mod tests {
         assert_eq!(AvgPoolParams::ppm(s, 1).unwrap().output_shape(s), Ok(Shape::new(8, 1, 1)));
     }
 
-    #[test]
-    fn avgpool_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0x9001);
-        for i in 0..300 {
-            let c = if i % 7 == 0 { rng.usize(60, 130) } else { rng.usize(1, 6) };
-            let xs = Shape::new(c, rng.usize(1, 14), rng.usize(1, 41));
-            let p = AvgPoolParams::ppm(xs, rng.usize(1, 6)).unwrap();
-            let os = p.output_shape(xs).unwrap();
-            let x = rng.i8s(xs.len());
-            let (s_in, zp_in) = (rng.f64(0.01, 0.1), rng.zp());
-            let (s_out, zp_out) = (s_in * rng.f64(0.5, 1.5), rng.zp());
-            let q = PoolQuant::new(s_in, zp_in, s_out, zp_out);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            assert_eq!(avgpool_reference(&x, xs, &p, &q, &mut r), Ok(os));
-            assert_eq!(avgpool_fast(&x, xs, &p, &q, &mut f), Ok(os));
-            assert_eq!(r, f, "{xs:?} {p:?}");
+    /// An average-pool case with its scales (for the float check).
+    struct PoolCase {
+        x: Vec<i8>,
+        xs: Shape,
+        p: AvgPoolParams,
+        q: PoolQuant,
+        scales: (f64, f64),
+    }
+
+    impl KernelCase for PoolCase {
+        fn out_shape(&self) -> Shape {
+            self.p.output_shape(self.xs).unwrap()
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            avgpool_reference(&self.x, self.xs, &self.p, &self.q, out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            avgpool_fast(&self.x, self.xs, &self.p, &self.q, out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} {:?}", self.xs, self.p)
+        }
+        fn check(&self, r: &[i8]) {
+            let (xs, p, os) = (self.xs, self.p, self.out_shape());
+            let (s_in, s_out) = self.scales;
+            let (zp_in, zp_out) = (self.q.input_zero_point, self.q.output_zero_point);
             let mut e = vec![0i32; os.len()];
             for oy in 0..os.h {
                 for ox in 0..os.w {
-                    for ch in 0..c {
+                    for ch in 0..xs.c {
                         let (mut s, mut n) = (0.0, 0.0);
                         for iy in oy * p.kernel.0..((oy + 1) * p.kernel.0).min(xs.h) {
                             for ix in ox * p.kernel.1..((ox + 1) * p.kernel.1).min(xs.w) {
-                                s += (x[xs.index(ch, iy, ix)] as i32 - zp_in) as f64 * s_in;
+                                s += (self.x[xs.index(ch, iy, ix)] as i32 - zp_in) as f64 * s_in;
                                 n += 1.0;
                             }
                         }
@@ -243,8 +225,24 @@ mod tests {
                     }
                 }
             }
-            assert!(max_diff(&r, &e) <= 1);
+            assert!(max_diff(r, &e) <= 1, "{}", self.describe());
         }
+    }
+
+    kernel_equivalence!(avgpool_fast_equals_reference_and_float, 0x9001, 300, |rng, i| {
+        // every 7th case more channels than the 64-channel accumulator block
+        let c = if i % 7 == 0 { rng.usize(60, 130) } else { rng.usize(1, 6) };
+        let xs = Shape::new(c, rng.usize(1, 14), rng.usize(1, 41));
+        let p = AvgPoolParams::ppm(xs, rng.usize(1, 6)).unwrap();
+        let x = rng.i8s(xs.len());
+        let (s_in, zp_in) = (rng.f64(0.01, 0.1), rng.zp());
+        let (s_out, zp_out) = (s_in * rng.f64(0.5, 1.5), rng.zp());
+        let q = PoolQuant::new(s_in, zp_in, s_out, zp_out);
+        Some(PoolCase { x, xs, p, q, scales: (s_in, s_out) })
+    });
+
+    #[test]
+    fn avgpool_bad_parameters_are_errors() {
         let huge = AvgPoolParams { kernel: (usize::MAX, usize::MAX), pad_bottom_right: (0, 0) };
         let q = PoolQuant::new(0.1, 0, 0.1, 0);
         assert_eq!(

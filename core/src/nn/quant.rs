@@ -21,10 +21,10 @@
 //!
 //! **Vector forms.** gemmlowp's step 2 is exactly `floor((x·M + 2^30) / 2^31)` for either sign
 //! (its sign-dependent nudge and truncation amount to that), which needs no compare; steps 1 and
-//! 3 vectorise as they stand. The SIMD kernels (`nn::simd`) and the portable `Lanes8` compute
-//! 8 lanes that way with plain (wrapping) adds and shifts, which equal the saturating ones
-//! whenever `|acc + bias| · 2^left ≤ 2^30` — [`fits_simd_requant`], checked once per op from the
-//! reduction length and the largest bias (else the scalar [`Requant::to_i8`] runs).
+//! 3 vectorise as they stand. The x86 kernels (`nn::x86::lanes`) and the portable `Lanes8`
+//! compute 8 lanes that way with plain (wrapping) adds and shifts, which equal the saturating
+//! ones whenever `|acc + bias| · 2^left ≤ 2^30` — [`fits_simd_requant`], checked once per op
+//! from the reduction length and the largest bias (else the scalar [`Requant::to_i8`] runs).
 
 /// A real scale as a Q0.31 multiplier and a power-of-two shift: `scale ≈ multiplier · 2^(shift−31)`.
 ///
@@ -170,41 +170,6 @@ pub fn fits_simd_requant(acc_bound: i64, bias: &[i32], requant: &[Requant]) -> b
     acc_bound.saturating_add(max_bias).saturating_mul(1i64 << max_left) <= SIMD_REQUANT_BOUND
 }
 
-#[cfg(test)]
-std::thread_local! {
-    /// Set by tests to run the portable kernels where SIMD ones exist (per test thread).
-    pub(crate) static FORCE_PORTABLE: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
-}
-
-/// Whether the kernels may take their SIMD paths: unless capped to the portable ones
-/// (`simd::set_max_isa`) or, in tests, forced to them on this thread (so both are checked
-/// against the reference on x86-64).
-#[inline]
-#[cfg_attr(not(all(target_arch = "x86_64", target_feature = "avx2")), allow(dead_code))]
-pub(crate) fn simd_allowed() -> bool {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-    if !super::simd::simd_enabled() {
-        return false;
-    }
-    #[cfg(test)]
-    {
-        !FORCE_PORTABLE.with(|f| f.get())
-    }
-    #[cfg(not(test))]
-    {
-        true
-    }
-}
-
-/// Runs `f` with the portable kernels forced on this thread (tests).
-#[cfg(test)]
-pub(crate) fn portable<R>(f: impl FnOnce() -> R) -> R {
-    FORCE_PORTABLE.with(|p| p.set(true));
-    let r = f();
-    FORCE_PORTABLE.with(|p| p.set(false));
-    r
-}
-
 /// The requantisers of 8 lanes in a branch-free form (the same integers as
 /// [`Requant::apply`]) that the auto-vectoriser maps onto SIMD lanes: `vpmuldq` / `smull` for
 /// the 64-bit products, per-lane shifts. For the portable kernels; valid under
@@ -239,7 +204,7 @@ impl Lanes8 {
         let mut out = [0i8; 8];
         for l in 0..8 {
             let v = x[l] << self.left[l];
-            // SRDHM: floor((v·M + 2^30) / 2^31), whatever the sign (see simd's module docs)
+            // SRDHM: floor((v·M + 2^30) / 2^31), whatever the sign (see `nn::x86::lanes`)
             let s = ((v as i64 * self.m[l] + (1 << 30)) >> 31) as i32;
             // RoundingDivideByPOT, as rounding_divide_by_pot
             let q = (s >> self.right[l]) + i32::from((s & self.mask[l]) > self.half[l] - (s >> 31));

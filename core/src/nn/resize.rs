@@ -19,10 +19,13 @@
 //! tests assert exactly this). ONNX computes the scale `n_out/n_in` in f32; the exact rational
 //! used here differs from it by less than `10^-6` pixel, far below the weight rounding.
 //!
-//! The fast kernel computes the y taps once per output row and the x taps once per output
-//! pixel, and blends whole channel vectors (NHWC) in one zipped loop; the reference recomputes
-//! everything per element. No scratch memory.
+//! This file holds the definition, the checks at entry and the reference kernel, which
+//! recomputes everything per element (no scratch memory). [`resize_bilinear_fast`] hands the
+//! checked operands to `nn::dispatch`: `nn::x86::resize` (separable, AVX2; 40 KiB of stack)
+//! or `nn::portable::resize` (taps hoisted per row and pixel, channel vectors blended in one
+//! zipped loop; no scratch).
 
+use super::dispatch;
 use super::{check_tensor, check_zero_point, NnError, Requant, Shape};
 
 /// Fractional bits of the interpolation weights.
@@ -81,8 +84,9 @@ fn check_resize(
     Ok(os)
 }
 
+/// The 2-D blend of four zero-point-corrected neighbours with 11-bit weights (`|·| < 2^31`).
 #[inline]
-fn blend(a: i32, b: i32, c: i32, d: i32, wx: i32, wy: i32) -> i32 {
+pub(crate) fn blend(a: i32, b: i32, c: i32, d: i32, wx: i32, wy: i32) -> i32 {
     (ONE - wy) * ((ONE - wx) * a + wx * b) + wy * ((ONE - wx) * c + wx * d)
 }
 
@@ -110,11 +114,11 @@ pub fn resize_bilinear_reference(
     Ok(os)
 }
 
-/// Bilinear resize, fast. On x86-64 with AVX2 (outputs up to 2048 wide): `nn::simd`'s
-/// separable kernel — each source row blended in `x` once per chunk of output columns, each
-/// output row then one flat blend in `y` and requantisation of 8 values at a time, whatever
-/// the channel count. Portable: taps hoisted per row / pixel, channel vectors blended in one
-/// pass.
+/// Bilinear resize, fast: the same integers as [`resize_bilinear_reference`]. On x86-64 with
+/// AVX2 (outputs up to 2048 wide) `nn::x86::resize`'s separable kernel — each source row
+/// blended in `x` once per chunk of output columns, each output row then one flat blend in `y`
+/// and requantisation of 8 values at a time, whatever the channel count. Portable
+/// (`nn::portable::resize`): taps hoisted per row / pixel, channel vectors blended in one pass.
 pub fn resize_bilinear_fast(
     x: &[i8],
     xs: Shape,
@@ -123,63 +127,18 @@ pub fn resize_bilinear_fast(
     out: &mut [i8],
 ) -> Result<Shape, NnError> {
     let os = check_resize(x, xs, size, q, out)?;
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
-    if super::quant::simd_allowed()
-        && xs.c <= super::simd::RESIZE_MAX_C
-        && os.w <= super::simd::RESIZE_MAX_OW
-        && super::quant::fits_simd_requant(255 << (2 * RESIZE_FRAC_BITS), &[], &[q.requant])
-    {
-        let a = super::simd::Rs {
-            x,
-            h: xs.h,
-            w: xs.w,
-            c: xs.c,
-            oh: os.h,
-            ow: os.w,
-            zp: q.input_zero_point,
-            zo: q.output_zero_point,
-            requant: q.requant,
-            taps: half_pixel_taps,
-        };
-        super::simd::resize(&a, out);
-        return Ok(os);
-    }
-    resize_portable(x, xs, q, out, os);
+    dispatch::resize_bilinear(x, xs, q, out, os);
     Ok(os)
-}
-
-/// The portable resize kernel (see [`resize_bilinear_fast`]).
-fn resize_portable(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i8], os: Shape) {
-    let c = xs.c;
-    let zp = q.input_zero_point;
-    let zo = q.output_zero_point;
-    let rq = q.requant;
-    let out = &mut out[..os.len()];
-    for (oy, orow) in out.chunks_exact_mut(os.w * c).enumerate() {
-        let (y0, y1, wy) = half_pixel_taps(oy, xs.h, os.h);
-        let (r0, r1) = (y0 * xs.w * c, y1 * xs.w * c);
-        for (ox, opix) in orow.chunks_exact_mut(c).enumerate() {
-            let (x0, x1, wx) = half_pixel_taps(ox, xs.w, os.w);
-            let (p0, p1) = (x0 * c, x1 * c);
-            let a = &x[r0 + p0..r0 + p0 + c];
-            let b = &x[r0 + p1..r0 + p1 + c];
-            let cc = &x[r1 + p0..r1 + p0 + c];
-            let d = &x[r1 + p1..r1 + p1 + c];
-            for ((((o, &va), &vb), &vc), &vd) in opix.iter_mut().zip(a).zip(b).zip(cc).zip(d) {
-                let acc =
-                    blend(va as i32 - zp, vb as i32 - zp, vc as i32 - zp, vd as i32 - zp, wx, wy);
-                *o = rq.to_i8(acc, zo, -128, 127);
-            }
-        }
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::quant::portable;
-    use crate::nn::testutil::{max_diff, quantise, Rng};
+    use crate::nn::testutil::{kernel_equivalence, max_diff, quantise, KernelCase, Rng};
+    use std::format;
+    use std::string::String;
     use std::vec;
+    use std::vec::Vec;
 
     /// ONNX half_pixel linear taps in f64: (i0, i1, frac).
     fn float_taps(o: usize, n_in: usize, n_out: usize) -> (usize, usize, f64) {
@@ -211,67 +170,55 @@ mod tests {
         }
     }
 
-    /// The resizes of the 192×640 network (`benches/nn.rs`): the PPM's 1/2/3/6 bins to 6×20,
-    /// the FFM's ×4, and the classifier's 11 channels ×8 (on a smaller map).
-    #[test]
-    fn resize_workload_shapes_are_bit_equal() {
-        let mut rng = Rng::new(0x5f);
-        let cases = [
-            (Shape::new(11, 6, 20), (48, 160)),
-            (Shape::new(11, 24, 80), (192, 640)),
-            (Shape::new(128, 6, 20), (24, 80)),
-            (Shape::new(32, 1, 1), (6, 20)),
-            (Shape::new(32, 2, 2), (6, 20)),
-            (Shape::new(32, 3, 3), (6, 20)),
-            (Shape::new(32, 6, 5), (6, 20)),
-        ];
-        for (xs, size) in cases {
-            let os = Shape::new(xs.c, size.0, size.1);
-            let x = rng.i8s(xs.len());
-            let q = ResizeQuant::new(rng.f64(0.01, 0.1), rng.zp(), rng.f64(0.01, 0.1), rng.zp());
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            let mut g = vec![2i8; os.len()];
-            resize_bilinear_reference(&x, xs, size, &q, &mut r).unwrap();
-            resize_bilinear_fast(&x, xs, size, &q, &mut f).unwrap();
-            portable(|| resize_bilinear_fast(&x, xs, size, &q, &mut g)).unwrap();
-            assert_eq!(r, f, "{xs:?} {size:?}");
-            assert_eq!(r, g, "portable {xs:?} {size:?}");
-        }
+    /// A resize case with its scales (for the float check, when `float`).
+    struct ResizeCase {
+        x: Vec<i8>,
+        xs: Shape,
+        size: (usize, usize),
+        q: ResizeQuant,
+        scales: (f64, f64),
+        float: bool,
     }
 
-    #[test]
-    fn resize_fast_equals_reference_and_float() {
-        let mut rng = Rng::new(0x5e);
-        for i in 0..300 {
-            let c = if i % 9 == 0 { rng.usize(30, 70) } else { rng.usize(1, 13) };
-            let xs = Shape::new(c, rng.usize(1, 7), rng.usize(1, 7));
-            let size = match i % 3 {
-                0 => (xs.h * 4, xs.w * 4),
-                1 => (xs.h * 8, xs.w * 8),
-                _ => (rng.usize(1, 30), rng.usize(1, 30)),
-            };
-            let os = Shape::new(c, size.0, size.1);
+    impl ResizeCase {
+        fn new(rng: &mut Rng, xs: Shape, size: (usize, usize), zp_same: bool, float: bool) -> Self {
             let x = rng.i8s(xs.len());
             let (s_in, zp_in) = (rng.f64(0.01, 0.1), rng.zp());
             let (s_out, zp_out) =
-                if i % 2 == 0 { (s_in, zp_in) } else { (s_in * rng.f64(0.7, 1.3), rng.zp()) };
+                if zp_same { (s_in, zp_in) } else { (s_in * rng.f64(0.7, 1.3), rng.zp()) };
             let q = ResizeQuant::new(s_in, zp_in, s_out, zp_out);
-            let mut r = vec![0i8; os.len()];
-            let mut f = vec![1i8; os.len()];
-            assert_eq!(resize_bilinear_reference(&x, xs, size, &q, &mut r), Ok(os));
-            assert_eq!(resize_bilinear_fast(&x, xs, size, &q, &mut f), Ok(os));
-            assert_eq!(r, f, "{xs:?} {size:?}");
-            let mut g = vec![2i8; os.len()];
-            portable(|| resize_bilinear_fast(&x, xs, size, &q, &mut g)).unwrap();
-            assert_eq!(r, g, "portable {xs:?} {size:?}");
+            Self { x, xs, size, q, scales: (s_in, s_out), float }
+        }
+    }
+
+    impl KernelCase for ResizeCase {
+        fn out_shape(&self) -> Shape {
+            Shape::new(self.xs.c, self.size.0, self.size.1)
+        }
+        fn reference(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            resize_bilinear_reference(&self.x, self.xs, self.size, &self.q, out)
+        }
+        fn fast(&self, out: &mut [i8]) -> Result<Shape, NnError> {
+            resize_bilinear_fast(&self.x, self.xs, self.size, &self.q, out)
+        }
+        fn describe(&self) -> String {
+            format!("{:?} -> {:?}", self.xs, self.size)
+        }
+        fn check(&self, r: &[i8]) {
+            if !self.float {
+                return;
+            }
+            let (xs, os) = (self.xs, self.out_shape());
+            let (s_in, s_out) = self.scales;
+            let (zp_in, zp_out) = (self.q.input_zero_point, self.q.output_zero_point);
             let mut e = vec![0i32; os.len()];
             for oy in 0..os.h {
                 let (y0, y1, fy) = float_taps(oy, xs.h, os.h);
                 for ox in 0..os.w {
                     let (x0, x1, fx) = float_taps(ox, xs.w, os.w);
-                    for ch in 0..c {
-                        let v = |yy, xx| (x[xs.index(ch, yy, xx)] as i32 - zp_in) as f64 * s_in;
+                    for ch in 0..xs.c {
+                        let v =
+                            |yy, xx| (self.x[xs.index(ch, yy, xx)] as i32 - zp_in) as f64 * s_in;
                         let top = v(y0, x0) * (1.0 - fx) + v(y0, x1) * fx;
                         let bot = v(y1, x0) * (1.0 - fx) + v(y1, x1) * fx;
                         let y = top * (1.0 - fy) + bot * fy;
@@ -279,8 +226,55 @@ mod tests {
                     }
                 }
             }
-            assert!(max_diff(&r, &e) <= 1, "{xs:?} {size:?}");
+            assert!(max_diff(r, &e) <= 1, "{}", self.describe());
         }
+    }
+
+    /// The resizes of the 192×640 network (`benches/nn.rs`): the PPM's 1/2/3/6 bins to 6×20,
+    /// the FFM's ×4, and the classifier's 11 channels ×8 (on a smaller map).
+    const WORKLOAD: [(Shape, (usize, usize)); 7] = [
+        (Shape::new(11, 6, 20), (48, 160)),
+        (Shape::new(11, 24, 80), (192, 640)),
+        (Shape::new(128, 6, 20), (24, 80)),
+        (Shape::new(32, 1, 1), (6, 20)),
+        (Shape::new(32, 2, 2), (6, 20)),
+        (Shape::new(32, 3, 3), (6, 20)),
+        (Shape::new(32, 6, 5), (6, 20)),
+    ];
+
+    kernel_equivalence!(resize_workload_shapes_are_bit_equal, 0x5f, 7, |rng, i| {
+        let (xs, size) = WORKLOAD[i];
+        let x = rng.i8s(xs.len());
+        let q = ResizeQuant::new(rng.f64(0.01, 0.1), rng.zp(), rng.f64(0.01, 0.1), rng.zp());
+        Some(ResizeCase { x, xs, size, q, scales: (0.0, 0.0), float: false })
+    });
+
+    kernel_equivalence!(resize_fast_equals_reference_and_float, 0x5e, 300, |rng, i| {
+        let c = if i % 9 == 0 { rng.usize(30, 70) } else { rng.usize(1, 13) };
+        let xs = Shape::new(c, rng.usize(1, 7), rng.usize(1, 7));
+        let size = match i % 3 {
+            0 => (xs.h * 4, xs.w * 4),
+            1 => (xs.h * 8, xs.w * 8),
+            _ => (rng.usize(1, 30), rng.usize(1, 30)),
+        };
+        // every other case the input's own quantisation
+        Some(ResizeCase::new(rng, xs, size, i % 2 == 0, true))
+    });
+
+    kernel_equivalence!(resize_beyond_the_x86_limits_is_bit_equal, 0x60, 4, |rng, i| {
+        // more channels than the x86 kernel's chunk holds, or a wider output than its column
+        // table: the portable kernel on every level
+        let (xs, size) = match i {
+            0 => (Shape::new(2040, 1, 2), (2, 3)),
+            1 => (Shape::new(2100, 2, 1), (3, 1)),
+            2 => (Shape::new(1, 2, 3), (2, 2100)),
+            _ => (Shape::new(3, 1, 2), (1, 2049)),
+        };
+        Some(ResizeCase::new(rng, xs, size, false, true))
+    });
+
+    #[test]
+    fn resize_bad_operands_are_errors() {
         let q = ResizeQuant::new(0.1, 0, 0.1, 0);
         assert_eq!(
             resize_bilinear_fast(&[0; 4], Shape::new(1, 2, 2), (4, 4), &q, &mut [0; 15]),

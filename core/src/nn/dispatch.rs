@@ -1,0 +1,188 @@
+//! # dispatch: which fast kernel runs, one function per op family
+//!
+//! The one place that picks the fast kernel of each op family: an instruction-set kernel where
+//! this build and CPU have one (and it takes the op: each returns `false` otherwise), else the
+//! [`super::portable`] kernel. Every `*_fast` op checks its operands and then calls exactly
+//! one function here. A run-time CPU-feature check (AVX2 on a baseline x86-64 build, NEON dot
+//! products on aarch64, …) belongs in `level` and the arms below, nowhere else.
+//!
+//! | family                    | x86-64 with AVX2                         | elsewhere             |
+//! |---------------------------|------------------------------------------|-----------------------|
+//! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `portable::conv`      |
+//! | [`depthwise3x3`]          | `x86::depthwise`                         | `portable::depthwise` |
+//! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `portable::pointwise` |
+//! | [`resize_bilinear`]       | `x86::resize`                            | `portable::resize`    |
+//! | [`add`], [`concat_input`] | `x86::eltwise`                           | `portable::eltwise`   |
+//! | [`relu`], [`avgpool`]     | —                                        | `portable::{eltwise, pool}` |
+//!
+//! The level is the CPU's best, capped process-wide by `x86::set_max_isa` (measurements) and,
+//! in tests, per thread by [`for_each_level`], which runs a closure once per level this CPU
+//! has (the shared `kernel_equivalence!` tests use it). **Memory:** none of its own.
+
+#[cfg(all(test, target_arch = "x86_64", target_feature = "avx2"))]
+use core::cell::Cell;
+
+use super::conv::{Conv2dParams, ConvQuant};
+use super::eltwise::{AddQuant, ConcatInput, Rescale};
+use super::pool::{AvgPoolParams, PoolQuant};
+use super::portable;
+use super::resize::ResizeQuant;
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+use super::x86::{self, Isa};
+use super::Shape;
+
+#[cfg(all(test, target_arch = "x86_64", target_feature = "avx2"))]
+std::thread_local! {
+    /// The highest level the fast kernels may use on this test thread.
+    static TEST_CAP: Cell<Isa> = const { Cell::new(Isa::Avx512Vnni) };
+}
+
+/// The cap of this thread (none outside tests).
+#[cfg(all(not(test), target_arch = "x86_64", target_feature = "avx2"))]
+#[inline(always)]
+fn thread_cap() -> Isa {
+    Isa::Avx512Vnni
+}
+
+#[cfg(all(test, target_arch = "x86_64", target_feature = "avx2"))]
+fn thread_cap() -> Isa {
+    TEST_CAP.with(Cell::get)
+}
+
+/// The instruction-set level of this call: the CPU's best, capped by `x86::set_max_isa` (and,
+/// in tests, by the thread's cap).
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[inline]
+fn level() -> Isa {
+    x86::isa().min(thread_cap())
+}
+
+/// General conv (`os`: the output shape).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn conv2d(
+    x: &[i8],
+    xs: Shape,
+    p: &Conv2dParams,
+    w: &[i8],
+    b: &[i32],
+    q: &ConvQuant<'_>,
+    out: &mut [i8],
+    os: Shape,
+) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if level() >= Isa::Avx2 && x86::conv1::conv3x3_c1(x, xs, p, w, b, q, out, os) {
+        return;
+    }
+    portable::conv::conv2d(x, xs, p, w, b, q, out, os)
+}
+
+/// Depthwise 3×3 conv, pad 1 (`os`: the output shape).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn depthwise3x3(
+    x: &[i8],
+    xs: Shape,
+    stride: usize,
+    w: &[i8],
+    b: &[i32],
+    q: &ConvQuant<'_>,
+    out: &mut [i8],
+    os: Shape,
+) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if level() >= Isa::Avx2 && x86::depthwise::depthwise3x3(x, xs, stride, w, b, q, out) {
+        return;
+    }
+    portable::depthwise::depthwise3x3(x, xs, stride, w, b, q, out, os)
+}
+
+/// Pointwise 1×1 conv over packed weights.
+pub(crate) fn pointwise(
+    x: &[i8],
+    xs: Shape,
+    w: &[i8],
+    b: &[i32],
+    q: &ConvQuant<'_>,
+    out: &mut [i8],
+) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        let level = level();
+        let vnni = level == Isa::Avx512Vnni;
+        if level >= Isa::Avx2 && x86::pointwise::pointwise(x, xs, w, b, q, out, vnni) {
+            return;
+        }
+    }
+    portable::pointwise::pointwise(x, xs, w, b, q, out)
+}
+
+/// Bilinear resize (`os`: the output shape).
+pub(crate) fn resize_bilinear(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i8], os: Shape) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if level() >= Isa::Avx2 && x86::resize::resize_bilinear(x, xs, q, out, os) {
+        return;
+    }
+    portable::resize::resize_bilinear(x, xs, q, out, os)
+}
+
+/// `Add` of two same-shaped tensors.
+pub(crate) fn add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if level() >= Isa::Avx2 && x86::eltwise::add(a, b, shape, q, out) {
+        return;
+    }
+    portable::eltwise::add(a, b, shape, q, out)
+}
+
+/// One input of a channel `Concat`, into channels `c0..` of the output of shape `os`.
+pub(crate) fn concat_input(i: &ConcatInput<'_>, c0: usize, os: Shape, out: &mut [i8]) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    if level() >= Isa::Avx2 && x86::eltwise::concat_input(i, c0, os, out) {
+        return;
+    }
+    portable::eltwise::concat_input(i, c0, os, out)
+}
+
+/// Standalone `Relu` (portable on every target: a `max` or one rescale per byte).
+pub(crate) fn relu(x: &[i8], shape: Shape, r: &Rescale, out: &mut [i8]) {
+    portable::eltwise::relu(x, shape, r, out)
+}
+
+/// The PPM's average pool (portable on every target).
+pub(crate) fn avgpool(
+    x: &[i8],
+    xs: Shape,
+    p: &AvgPoolParams,
+    q: &PoolQuant,
+    out: &mut [i8],
+    os: Shape,
+) {
+    portable::pool::avgpool(x, xs, p, q, out, os)
+}
+
+/// Runs `f` once per fast-kernel level this build and CPU have, most capable first, with the
+/// level capped to it on this thread; `f` gets the level's name (tests).
+#[cfg(test)]
+pub(crate) fn for_each_level(mut f: impl FnMut(&'static str)) {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        /// Lifts the cap when dropped, also when `f` panics.
+        struct Cap;
+        impl Drop for Cap {
+            fn drop(&mut self) {
+                TEST_CAP.with(|c| c.set(Isa::Avx512Vnni));
+            }
+        }
+        let levels =
+            [(Isa::Avx512Vnni, "avx512vnni"), (Isa::Avx2, "avx2"), (Isa::Portable, "portable")];
+        for (isa, name) in levels {
+            if isa == Isa::Avx512Vnni && !x86::vnni_available() {
+                continue;
+            }
+            TEST_CAP.with(|c| c.set(isa));
+            let _cap = Cap;
+            f(name);
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    f("portable");
+}
