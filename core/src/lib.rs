@@ -10,7 +10,8 @@
 //!   Jacobians.
 //! - [`frame`]: the tracker's input, one stereo frame's features.
 //! - [`optim`]: motion-only pose optimisation and sliding-window bundle adjustment.
-//! - [`map`]: the bounded window of keyframes and landmarks.
+//! - [`assoc`]: data association, nearest neighbour or EM (paper §3.3), and the pose solve.
+//! - [`map`]: the bounded window of keyframes and landmarks and its keyframe maintenance.
 //! - [`tracker`]: the per-frame stereo tracker, core's SLAM entry point.
 //! - [`image`], [`orb`], [`stereo`], [`ransac`]: the geometric front end.
 //! - [`seg`], [`semdesc`]: class table, semantic ORB weights and the semantic descriptor.
