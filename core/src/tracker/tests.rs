@@ -1,0 +1,230 @@
+use super::*;
+use crate::assoc::hard::LN_SCALE;
+use nalgebra::{Vector3, Vector6};
+use std::boxed::Box;
+use std::vec::Vec as StdVec;
+
+const W: u32 = 1241;
+const H: u32 = 376;
+
+fn cam() -> StereoCamera {
+    StereoCamera { fx_px: 718.856, fy_px: 718.856, cx_px: 607.19, cy_px: 185.22, baseline_m: 0.537 }
+}
+
+struct Rng(u64);
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+    fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A landmark of the synthetic world: position, descriptor and the distance at which it
+/// appears on pyramid level 0 (closer, it is found on higher levels, as a real detector
+/// finds a feature on the level where it has its native size).
+type Point = (Vector3<f64>, [u8; 32], f64);
+
+/// A corridor of textured points along +z (building facades left/right, ground).
+fn world(rng: &mut Rng) -> StdVec<Point> {
+    (0..6000)
+        .map(|_| {
+            let z = rng.uniform() * 120.0;
+            let side = rng.next_u64() % 3;
+            let p = match side {
+                0 => Vector3::new(-6.0 - rng.uniform(), -rng.uniform() * 6.0 + 1.6, z),
+                1 => Vector3::new(6.0 + rng.uniform(), -rng.uniform() * 6.0 + 1.6, z),
+                _ => Vector3::new(rng.uniform() * 12.0 - 6.0, 1.6, z),
+            };
+            let mut d = [0u8; 32];
+            for b in d.iter_mut() {
+                *b = rng.next_u64() as u8;
+            }
+            (p, d, 10.0 + rng.uniform() * 50.0)
+        })
+        .collect()
+}
+
+/// Ground-truth camera-to-world pose at frame k: forward 1 m/frame with a gentle turn.
+fn truth(k: usize) -> Se3 {
+    let yaw = 0.004 * k as f64;
+    let xi = Vector6::new(0.0, 0.0, 0.0, 0.0, yaw, 0.0);
+    let r = Se3::exp(&xi).rot;
+    Se3::new(r, Vector3::new(0.05 * k as f64 * yaw, 0.0, k as f64))
+}
+
+fn render(pts: &[Point], t_wc: &Se3, rng: &mut Rng) -> Frame {
+    let c = cam();
+    let t_cw = t_wc.inverse();
+    let mut f = Frame::new();
+    for (p, d, native) in pts {
+        let pc = t_cw.transform_point(p);
+        if pc.z < 1.0 || pc.z > 80.0 {
+            continue;
+        }
+        // Level on which a detector finds it; too far (smaller than level 0) is not found.
+        let lv = libm::round(libm::log(native / pc.norm()) / LN_SCALE);
+        if !(0.0..=7.0).contains(&lv) {
+            continue;
+        }
+        let u = c.fx_px * pc.x / pc.z + c.cx_px + (rng.uniform() - 0.5) * 0.5;
+        let v = c.fy_px * pc.y / pc.z + c.cy_px + (rng.uniform() - 0.5) * 0.5;
+        if !(u > 0.0 && v > 0.0 && u < f64::from(W) && v < f64::from(H)) {
+            continue;
+        }
+        let ur = u - c.fx_px * c.baseline_m / pc.z;
+        let mut desc = *d;
+        desc[(rng.next_u64() % 32) as usize] ^= 1 << (rng.next_u64() % 8);
+        let feature = Feature {
+            x: u as f32,
+            y: v as f32,
+            level: lv as u8,
+            angle: 0.0,
+            desc,
+            ur: ur as f32,
+            depth_m: (c.fx_px * c.baseline_m / (u - ur)) as f32,
+            class: crate::seg::VOID,
+        };
+        if f.features.push(feature).is_err() {
+            break;
+        }
+    }
+    f
+}
+
+fn run_on_big_stack<F: FnOnce() + Send + 'static>(f: F) {
+    std::thread::Builder::new().stack_size(64 << 20).spawn(f).unwrap().join().unwrap();
+}
+
+#[test]
+fn tracks_a_synthetic_drive() {
+    run_on_big_stack(|| {
+        let mut rng = Rng(0xdead_beef_cafe_f00d);
+        let pts = world(&mut rng);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        let mut max_err: f64 = 0.0;
+        let mut keyframes = 0;
+        for k in 0..40 {
+            let gt = truth(k);
+            let frame = render(&pts, &gt, &mut rng);
+            let rep = tracker.process(&frame);
+            assert!(!rep.lost, "frame {k}: lost ({rep:?})");
+            keyframes += usize::from(rep.keyframe);
+            let e = (rep.t_wc.trans - gt.trans).norm();
+            max_err = max_err.max(e);
+        }
+        assert!(max_err < 0.05, "max position error {max_err} m over 40 m");
+        assert!(keyframes >= 4, "{keyframes} keyframes");
+        assert_eq!(tracker.stats().lost, 0);
+    });
+}
+
+#[test]
+fn em_association_tracks_a_synthetic_drive() {
+    run_on_big_stack(|| {
+        let mut rng = Rng(0xdead_beef_cafe_f00d);
+        let pts = world(&mut rng);
+        let params = TrackerParams { association: Association::Em, ..TrackerParams::default() };
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, params).unwrap());
+        let (mut max_err, mut changed): (f64, u32) = (0.0, 0);
+        for k in 0..40 {
+            let gt = truth(k);
+            let rep = tracker.process(&render(&pts, &gt, &mut rng));
+            assert!(!rep.lost, "frame {k}: lost ({rep:?})");
+            max_err = max_err.max((rep.t_wc.trans - gt.trans).norm());
+            changed += rep.em_changed;
+        }
+        assert!(max_err < 0.05, "max position error {max_err} m over 40 m");
+        // Unique descriptors: EM keeps the nearest neighbour almost always.
+        assert!(changed < 40, "{changed} associations changed");
+    });
+}
+
+#[test]
+fn coasting_bridges_skipped_frames() {
+    run_on_big_stack(|| {
+        let mut rng = Rng(0xdead_beef_cafe_f00d);
+        let pts = world(&mut rng);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        tracker.coast();
+        assert_eq!(tracker.pose_wc().trans.norm(), 0.0, "no motion model yet: no-op");
+        for k in 0..24 {
+            let gt = truth(k);
+            if k == 10 || k == 11 {
+                // Frames the caller never saw: the prediction moves on without them.
+                tracker.coast();
+                assert!((tracker.pose_wc().trans - gt.trans).norm() < 0.05, "frame {k}");
+                continue;
+            }
+            if k == 18 {
+                tracker.forget_motion();
+            }
+            let frame = render(&pts, &gt, &mut rng);
+            let rep = tracker.process(&frame);
+            assert!(!rep.lost, "frame {k}: lost ({rep:?})");
+            assert!((rep.t_wc.trans - gt.trans).norm() < 0.05, "frame {k}");
+        }
+    });
+}
+
+#[test]
+fn loss_is_counted_and_the_map_restarts() {
+    run_on_big_stack(|| {
+        let mut rng = Rng(42);
+        let pts = world(&mut rng);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        for k in 0..5 {
+            tracker.process(&render(&pts, &truth(k), &mut rng));
+        }
+        // A frame of unrelated features: nothing matches.
+        let mut other = Rng(7);
+        let unrelated = world(&mut other);
+        let rep = tracker.process(&render(&unrelated, &truth(5), &mut rng));
+        assert!(rep.lost && rep.initialised);
+        assert_eq!(tracker.stats().lost, 1);
+        assert_eq!(rep.state, TrackState::Tracking);
+    });
+}
+
+#[test]
+fn too_few_stereo_points_waits_for_initialisation() {
+    run_on_big_stack(|| {
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        let rep = tracker.process(&Frame::new());
+        assert_eq!(rep.state, TrackState::Uninitialised);
+        assert!(!rep.initialised);
+    });
+}
+
+#[test]
+fn bad_image_size_is_an_error() {
+    run_on_big_stack(|| {
+        assert_eq!(
+            Tracker::new(cam(), 0, 10, TrackerParams::default()).err(),
+            Some(TrackerError::BadImageSize { width: 0, height: 10 })
+        );
+    });
+}
+
+#[test]
+fn tracker_memory_is_reported() {
+    std::println!(
+        "Tracker: {} bytes ({:.2} MiB)",
+        Tracker::MEMORY_BYTES,
+        Tracker::MEMORY_BYTES as f64 / 1048576.0
+    );
+    let mib = |b: usize| b as f64 / 1048576.0;
+    use core::mem::size_of;
+    std::println!(
+        "  map {:.2} MiB (window {:.2}), pose problem {:.2}, EM scratch {:.2}, search {:.3}",
+        mib(size_of::<LocalMap>()),
+        mib(size_of::<Window>()),
+        mib(size_of::<PoseProblem>()),
+        mib(size_of::<EmScratch>()),
+        mib(size_of::<ProjectionSearch>()),
+    );
+}
