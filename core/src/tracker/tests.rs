@@ -7,22 +7,7 @@ use std::vec::Vec as StdVec;
 const W: u32 = 1241;
 const H: u32 = 376;
 
-fn cam() -> StereoCamera {
-    StereoCamera { fx_px: 718.856, fy_px: 718.856, cx_px: 607.19, cy_px: 185.22, baseline_m: 0.537 }
-}
-
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
+use crate::testing::{kitti_cam as cam, Rng};
 
 /// A landmark of the synthetic world: position, descriptor and the distance at which it
 /// appears on pyramid level 0 (closer, it is found on higher levels, as a real detector
@@ -33,18 +18,18 @@ type Point = (Vector3<f64>, [u8; 32], f64);
 fn world(rng: &mut Rng) -> StdVec<Point> {
     (0..6000)
         .map(|_| {
-            let z = rng.uniform() * 120.0;
+            let z = rng.unit() * 120.0;
             let side = rng.next_u64() % 3;
             let p = match side {
-                0 => Vector3::new(-6.0 - rng.uniform(), -rng.uniform() * 6.0 + 1.6, z),
-                1 => Vector3::new(6.0 + rng.uniform(), -rng.uniform() * 6.0 + 1.6, z),
-                _ => Vector3::new(rng.uniform() * 12.0 - 6.0, 1.6, z),
+                0 => Vector3::new(-6.0 - rng.unit(), -rng.unit() * 6.0 + 1.6, z),
+                1 => Vector3::new(6.0 + rng.unit(), -rng.unit() * 6.0 + 1.6, z),
+                _ => Vector3::new(rng.unit() * 12.0 - 6.0, 1.6, z),
             };
             let mut d = [0u8; 32];
             for b in d.iter_mut() {
                 *b = rng.next_u64() as u8;
             }
-            (p, d, 10.0 + rng.uniform() * 50.0)
+            (p, d, 10.0 + rng.unit() * 50.0)
         })
         .collect()
 }
@@ -71,8 +56,8 @@ fn render(pts: &[Point], t_wc: &Se3, rng: &mut Rng) -> Frame {
         if !(0.0..=7.0).contains(&lv) {
             continue;
         }
-        let u = c.fx_px * pc.x / pc.z + c.cx_px + (rng.uniform() - 0.5) * 0.5;
-        let v = c.fy_px * pc.y / pc.z + c.cy_px + (rng.uniform() - 0.5) * 0.5;
+        let u = c.fx_px * pc.x / pc.z + c.cx_px + (rng.unit() - 0.5) * 0.5;
+        let v = c.fy_px * pc.y / pc.z + c.cy_px + (rng.unit() - 0.5) * 0.5;
         if !(u > 0.0 && v > 0.0 && u < f64::from(W) && v < f64::from(H)) {
             continue;
         }
@@ -103,7 +88,7 @@ fn run_on_big_stack<F: FnOnce() + Send + 'static>(f: F) {
 #[test]
 fn tracks_a_synthetic_drive() {
     run_on_big_stack(|| {
-        let mut rng = Rng(0xdead_beef_cafe_f00d);
+        let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
         let mut max_err: f64 = 0.0;
@@ -126,7 +111,7 @@ fn tracks_a_synthetic_drive() {
 #[test]
 fn em_association_tracks_a_synthetic_drive() {
     run_on_big_stack(|| {
-        let mut rng = Rng(0xdead_beef_cafe_f00d);
+        let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let params = TrackerParams { association: Association::Em, ..TrackerParams::default() };
         let mut tracker = Box::new(Tracker::new(cam(), W, H, params).unwrap());
@@ -147,7 +132,7 @@ fn em_association_tracks_a_synthetic_drive() {
 #[test]
 fn coasting_bridges_skipped_frames() {
     run_on_big_stack(|| {
-        let mut rng = Rng(0xdead_beef_cafe_f00d);
+        let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
         tracker.coast();
@@ -174,14 +159,14 @@ fn coasting_bridges_skipped_frames() {
 #[test]
 fn loss_is_counted_and_the_map_restarts() {
     run_on_big_stack(|| {
-        let mut rng = Rng(42);
+        let mut rng = Rng::new(42);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
         for k in 0..5 {
             tracker.process(&render(&pts, &truth(k), &mut rng));
         }
         // A frame of unrelated features: nothing matches.
-        let mut other = Rng(7);
+        let mut other = Rng::new(7);
         let unrelated = world(&mut other);
         let rep = tracker.process(&render(&unrelated, &truth(5), &mut rng));
         assert!(rep.lost && rep.initialised);
