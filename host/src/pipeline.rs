@@ -282,7 +282,7 @@ struct Prefetch {
 }
 
 /// Stack for threads that construct or run core's large fixed-size state.
-pub const BIG_STACK_BYTES: usize = 64 << 20;
+pub const BIG_STACK_BYTES: usize = 256 << 20;
 
 impl Pipeline {
     /// Builds the pipeline for `calib` and `width`x`height` images.

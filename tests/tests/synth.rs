@@ -271,7 +271,7 @@ fn orb_and_stereo_statistics_vs_kitti() {
     ) -> (usize, usize, u32, [usize; 8]) {
         let (l, r) = (l.clone(), r.clone());
         std::thread::Builder::new()
-            .stack_size(64 << 20)
+            .stack_size(256 << 20)
             .spawn(move || {
                 let mut el = Box::new(KittiOrbExtractor::new());
                 let mut er = Box::new(KittiOrbExtractor::new());

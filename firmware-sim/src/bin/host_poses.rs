@@ -18,7 +18,7 @@ use semloc_firmware_sim::{
 };
 
 /// Stack for the thread that builds the ≈ 10 MiB localiser (a by-value return may sit on it).
-const BIG_STACK_BYTES: usize = 64 << 20;
+const BIG_STACK_BYTES: usize = 256 << 20;
 
 /// Both runs; the text so far even on failure, and whether both tracked.
 fn run(text: &mut String) -> Result<bool, String> {
