@@ -258,11 +258,11 @@ fn right_image_matches_left_at_the_disparity_of_the_true_depth() {
 #[test]
 #[ignore = "measurement; needs ../shared/data/kitti-raw"]
 fn orb_and_stereo_statistics_vs_kitti() {
-    use semloc_core::frame::Frame;
+    use semloc_core::geom::StereoCamera;
     use semloc_core::image::ImageView;
-    use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
-    use semloc_core::stereo::{KittiStereoMatcher, StereoParams};
+    use semloc_core::localiser::{Localiser, LocaliserConfig};
 
+    /// Core's front end (both extractions and stereo matching, no tracking) on one pair.
     fn stats(
         l: &image::GrayImage,
         r: &image::GrayImage,
@@ -273,32 +273,22 @@ fn orb_and_stereo_statistics_vs_kitti() {
         std::thread::Builder::new()
             .stack_size(256 << 20)
             .spawn(move || {
-                let mut el = Box::new(KittiOrbExtractor::new());
-                let mut er = Box::new(KittiOrbExtractor::new());
-                el.configure(OrbConfig::KITTI).unwrap();
-                er.configure(OrbConfig::KITTI).unwrap();
                 let (w, h) = (l.width() as usize, l.height() as usize);
-                el.extract(&ImageView::from_slice(l.as_raw(), w, h).unwrap()).unwrap();
-                er.extract(&ImageView::from_slice(r.as_raw(), w, h).unwrap()).unwrap();
-                let mut m = Box::new(KittiStereoMatcher::new());
-                let mut frame = Box::new(Frame::new());
-                let params = StereoParams::new(bf, b);
-                let st = m
-                    .match_frame(
-                        el.features(),
-                        el.pyramid(),
-                        er.features(),
-                        er.pyramid(),
-                        &params,
-                        0.0,
-                        &mut frame,
-                    )
-                    .unwrap();
+                let f = f64::from(bf / b);
+                let cam =
+                    StereoCamera::new(f, f, w as f64 / 2.0, h as f64 / 2.0, f64::from(b)).unwrap();
+                let config = LocaliserConfig::new(cam, w as u32, h as u32);
+                let mut loc = Box::new(Localiser::new(&config).unwrap());
+                let lv = ImageView::from_slice(l.as_raw(), w, h).unwrap();
+                let rv = ImageView::from_slice(r.as_raw(), w, h).unwrap();
+                loc.extract(&lv, &rv).unwrap();
+                let st = loc.match_stereo(0.0).unwrap();
+                let left = loc.left_extractor().features();
                 let mut levels = [0usize; 8];
-                for kp in el.features().keypoints() {
+                for kp in left.keypoints() {
                     levels[(kp.level as usize).min(7)] += 1;
                 }
-                (el.features().len(), frame.stereo_count(), st.median_sad, levels)
+                (left.len(), loc.frame().stereo_count(), st.median_sad, levels)
             })
             .unwrap()
             .join()
