@@ -13,11 +13,9 @@
 //!   static traffic no worse than the backbone by more than 5 %.
 
 use semloc::dataset::Sequence;
-use semloc::eval::{evaluate, Align};
-use semloc::pipeline::Pipeline;
+use semloc::run::{RunConfig, Semantics};
 use semloc::synth::{generate, Dynamics, SynthConfig};
 use semloc_core::assoc::Association;
-use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
 
 const FRAMES: usize = 80;
@@ -29,31 +27,31 @@ fn generated(dir: &std::path::Path, dynamics: Dynamics) -> Sequence {
 }
 
 /// (ATE in m, path length in m, frames lost) with hard association.
-fn track(seq: &Sequence, semantics: Option<WeightScheme>) -> (f64, f64, u32) {
+fn track(seq: &Sequence, semantics: Semantics) -> (f64, f64, u32) {
     track_with(seq, semantics, Association::Hard)
 }
 
-/// (ATE in m, path length in m, frames lost).
-fn track_with(
-    seq: &Sequence,
-    semantics: Option<WeightScheme>,
-    association: Association,
-) -> (f64, f64, u32) {
-    let (w, h) = seq.image_size;
-    let params = TrackerParams { association, ..TrackerParams::default() };
-    let mut p = Pipeline::new(&seq.calib, w, h, params, 2).unwrap();
-    p.set_semantics(semantics);
-    let poses: Vec<_> =
-        (0..seq.len()).map(|i| p.process_sequence_frame(seq, i).unwrap().report.t_wc).collect();
-    let r = evaluate(seq.gt.as_ref().unwrap(), &poses, Align::Se3).unwrap();
-    (r.ate_rmse_m, r.path_length_m, p.tracker().stats().lost)
+/// (ATE in m, path length in m, frames lost): the library runner on every frame, two threads,
+/// SE(3)-aligned ATE against the generator's ground truth.
+fn track_with(seq: &Sequence, semantics: Semantics, association: Association) -> (f64, f64, u32) {
+    let out = tempfile::tempdir().unwrap();
+    let cfg = RunConfig {
+        semantics,
+        tracker: TrackerParams { association, ..TrackerParams::default() },
+        ..RunConfig::new(seq, out.path())
+    };
+    let r = semloc::run::run(cfg).unwrap();
+    assert!(r.failure.is_none(), "{:?}", r.failure);
+    assert_eq!(r.frames.len(), seq.len());
+    let e = r.eval.expect("the generated sequence has ground truth");
+    (e.ate_rmse_m, e.path_length_m, r.summary.lost)
 }
 
 #[test]
 fn static_traffic_tracks_within_half_a_percent() {
     let dir = tempfile::tempdir().unwrap();
     let seq = generated(dir.path(), Dynamics::Static);
-    let (ate, len, lost) = track(&seq, None);
+    let (ate, len, lost) = track(&seq, Semantics::Off);
     eprintln!("static: ATE {ate:.3} m over {len:.1} m ({:.3} %), lost {lost}", 100.0 * ate / len);
     assert!(ate <= 0.005 * len, "ATE {ate:.3} m > 0.5 % of {len:.1} m");
     assert_eq!(lost, 0);
@@ -63,8 +61,8 @@ fn static_traffic_tracks_within_half_a_percent() {
 fn high_traffic_breaks_the_backbone_and_culling_repairs_it() {
     let dir = tempfile::tempdir().unwrap();
     let seq = generated(dir.path(), Dynamics::High);
-    let (off, len, _) = track(&seq, None);
-    let (cull, _, lost) = track(&seq, Some(WeightScheme::Cull));
+    let (off, len, _) = track(&seq, Semantics::Off);
+    let (cull, _, lost) = track(&seq, Semantics::Cull);
     eprintln!("high: ATE off {off:.3} m, cull {cull:.3} m over {len:.1} m (cull lost {lost})");
     assert!(off > 0.05 * len, "no-semantics ATE {off:.3} m: the scene is not dynamic enough");
     assert!(cull <= off / 3.0, "culling ATE {cull:.3} m vs {off:.3} m without");
@@ -74,8 +72,8 @@ fn high_traffic_breaks_the_backbone_and_culling_repairs_it() {
 fn full_method_halves_the_backbone_error_in_high_traffic() {
     let dir = tempfile::tempdir().unwrap();
     let seq = generated(dir.path(), Dynamics::High);
-    let (backbone, len, _) = track(&seq, None);
-    let (full, _, lost) = track_with(&seq, Some(WeightScheme::Full), Association::Em);
+    let (backbone, len, _) = track(&seq, Semantics::Off);
+    let (full, _, lost) = track_with(&seq, Semantics::Full, Association::Em);
     eprintln!("high: ATE backbone {backbone:.3} m, full + EM {full:.3} m over {len:.1} m");
     assert!(full <= 0.5 * backbone, "full + EM {full:.3} m vs backbone {backbone:.3} m");
     assert_eq!(lost, 0);
@@ -85,9 +83,9 @@ fn full_method_halves_the_backbone_error_in_high_traffic() {
 fn full_method_costs_nothing_without_traffic() {
     let dir = tempfile::tempdir().unwrap();
     let seq = generated(dir.path(), Dynamics::Static);
-    let (backbone, len, _) = track(&seq, None);
-    let (full, _, lost) = track_with(&seq, Some(WeightScheme::Full), Association::Em);
-    let (em, _, _) = track_with(&seq, None, Association::Em);
+    let (backbone, len, _) = track(&seq, Semantics::Off);
+    let (full, _, lost) = track_with(&seq, Semantics::Full, Association::Em);
+    let (em, _, _) = track_with(&seq, Semantics::Off, Association::Em);
     eprintln!(
         "static: ATE backbone {backbone:.4} m, EM alone {em:.4} m, full + EM {full:.4} m over \
          {len:.1} m"

@@ -7,21 +7,22 @@
 //! ATE is 0.32 m). Also determinism: one worker thread and two give byte-identical trajectory
 //! files.
 
-use semloc::dataset::Sequence;
-use semloc::eval::{evaluate, Align};
-use semloc::pipeline::Pipeline;
-use semloc_core::geom::Se3;
-use semloc_core::tracker::TrackerParams;
+use std::path::Path;
 
-fn run(seq: &Sequence, threads: usize) -> (Vec<Se3>, u32) {
-    let (w, h) = seq.image_size;
-    let mut p = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), threads).unwrap();
-    let mut poses = Vec::new();
-    for i in 0..seq.len() {
-        let out = p.process_sequence_frame(seq, i).unwrap();
-        poses.push(out.report.t_wc);
-    }
-    (poses, p.tracker().stats().lost)
+use semloc::dataset::Sequence;
+use semloc::run::{RunConfig, RunResult};
+
+/// The library runner on `cfg`, which must track every frame it is given.
+fn run(cfg: RunConfig<'_>) -> RunResult {
+    let r = semloc::run::run(cfg).unwrap();
+    assert!(r.failure.is_none(), "{:?}", r.failure);
+    r
+}
+
+/// The trajectory files two runs wrote are the same bytes.
+fn assert_same_trajectory(a: &Path, b: &Path) {
+    let read = |d: &Path| std::fs::read(d.join("trajectory.txt")).unwrap();
+    assert_eq!(read(a), read(b), "1 vs 2 threads differ");
 }
 
 #[test]
@@ -29,9 +30,11 @@ fn run(seq: &Sequence, threads: usize) -> (Vec<Se3>, u32) {
 fn drive_0005_ate_within_bound_and_deterministic() {
     let Some(data) = semloc_tests::shared_data() else { return };
     let seq = Sequence::open_raw(&data.join("kitti-raw"), "2011_09_26_0005", None).unwrap();
-    let gt = seq.gt.clone().unwrap();
-    let (two, lost) = run(&seq, 2);
-    let report = evaluate(&gt, &two, Align::Se3).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (out2, out1) = (dir.path().join("two"), dir.path().join("one"));
+    let two = run(RunConfig { threads: 2, ..RunConfig::new(&seq, &out2) });
+    assert_eq!(two.frames.len(), seq.len());
+    let (report, lost) = (two.eval.unwrap(), two.summary.lost);
     eprintln!(
         "drive 0005: ATE {:.3} m over {:.1} m, lost {lost}",
         report.ate_rmse_m, report.path_length_m
@@ -39,12 +42,8 @@ fn drive_0005_ate_within_bound_and_deterministic() {
     assert!(report.ate_rmse_m <= 0.70, "ATE {:.3} m > 0.70 m", report.ate_rmse_m);
     assert_eq!(lost, 0, "tracking was lost");
 
-    let (one, _) = run(&seq, 1);
-    let dir = tempfile::tempdir().unwrap();
-    let (a, b) = (dir.path().join("two.txt"), dir.path().join("one.txt"));
-    semloc::traj::write_kitti(&a, &two).unwrap();
-    semloc::traj::write_kitti(&b, &one).unwrap();
-    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "1 vs 2 threads differ");
+    run(RunConfig { threads: 1, ..RunConfig::new(&seq, &out1) });
+    assert_same_trajectory(&out2, &out1);
 }
 
 /// The paper's front end with the committed int8 network: 40 frames of drive 0005 with
@@ -54,38 +53,36 @@ fn drive_0005_ate_within_bound_and_deterministic() {
 #[test]
 #[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
 fn drive_0005_with_network_semantics_is_deterministic() {
-    use semloc::nn::segment::Segmenter;
-    use semloc::nn::SlmBlob;
+    use semloc::run::{Network, Semantics};
     use semloc_core::assoc::Association;
-    use semloc_core::seg::WeightScheme;
+    use semloc_core::tracker::TrackerParams;
     let Some(data) = semloc_tests::shared_data() else { return };
     let seq = Sequence::open_raw(&data.join("kitti-raw"), "2011_09_26_0005", None).unwrap();
     let slm = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../models/artefacts/fastscnn_r2_192x640.slm");
-    let go = |threads: usize| {
-        let (w, h) = seq.image_size;
-        let params = TrackerParams { association: Association::Em, ..TrackerParams::default() };
-        let mut p = Pipeline::new(&seq.calib, w, h, params, threads).unwrap();
-        p.set_segmenter(Segmenter::new(SlmBlob::load(&slm).unwrap()).unwrap());
-        p.set_semantics(Some(WeightScheme::Full));
-        let (mut poses, mut culled) = (Vec::new(), 0u64);
-        for i in 0..40 {
-            let out = p.process_sequence_frame(&seq, i).unwrap();
-            assert!(out.times.seg_ms > 0.0, "frame {i} was not segmented");
-            poses.push(out.report.t_wc);
-            culled += u64::from(out.culled);
+    let dir = tempfile::tempdir().unwrap();
+    let go = |threads: u8, out: &Path| {
+        let r = run(RunConfig {
+            max_frames: Some(40),
+            threads,
+            tracker: TrackerParams { association: Association::Em, ..TrackerParams::default() },
+            semantics: Semantics::Full,
+            network: Some(Network::File(slm.clone())),
+            ..RunConfig::new(&seq, out)
+        });
+        assert_eq!(r.frames.len(), 40);
+        for (i, f) in r.frames.iter().enumerate() {
+            assert!(f.output.times.seg_ms > 0.0, "frame {i} was not segmented");
         }
-        (poses, culled, p.tracker().stats().lost)
+        let culled: u64 = r.frames.iter().map(|f| u64::from(f.output.culled)).sum();
+        (culled, r.summary.lost)
     };
-    let (two, culled, lost) = go(2);
-    let (one, culled1, _) = go(1);
+    let (out2, out1) = (dir.path().join("two"), dir.path().join("one"));
+    let (culled, lost) = go(2, &out2);
+    let (culled1, _) = go(1, &out1);
     eprintln!("drive 0005, 40 frames, network semantics: {culled} candidates culled, lost {lost}");
     assert_eq!(lost, 0);
     assert!(culled > 1000, "only {culled} candidates culled: the network found no dynamic pixels");
     assert_eq!(culled, culled1);
-    let dir = tempfile::tempdir().unwrap();
-    let (a, b) = (dir.path().join("two.txt"), dir.path().join("one.txt"));
-    semloc::traj::write_kitti(&a, &two).unwrap();
-    semloc::traj::write_kitti(&b, &one).unwrap();
-    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "1 vs 2 threads differ");
+    assert_same_trajectory(&out2, &out1);
 }

@@ -10,12 +10,14 @@ use anyhow::{Context, Result};
 use clap::Args;
 use semloc::dataset::Sequence;
 use semloc::pipeline::{CategoryCounts, Pipeline};
+use semloc::run::{association_name, Network, RunConfig, RunResult, Semantics};
+use semloc_core::assoc::Association;
 use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
 
 use super::eval::AlignArg;
 use super::info::DatasetArgs;
-use super::run::{execute, AssocArg, RunConfig, RunOutcome, SemanticsArg};
+use super::run::{run_with_progress, AssocArg, SemanticsArg};
 
 /// Arguments of `semloc ablate`.
 #[derive(Args, Debug)]
@@ -51,11 +53,11 @@ pub struct AblateArgs {
 /// One row of an ablation or demo table.
 pub struct Row {
     /// Semantic setting.
-    pub semantics: SemanticsArg,
+    pub semantics: Semantics,
     /// Association setting.
-    pub assoc: AssocArg,
+    pub assoc: Association,
     /// What the run produced.
-    pub outcome: RunOutcome,
+    pub outcome: RunResult,
 }
 
 /// One row of `ablation.json`.
@@ -85,10 +87,6 @@ struct Share {
     structure_pct_semantic: f64,
     dynamic_pct_plain: f64,
     dynamic_pct_semantic: f64,
-}
-
-fn lower<T: core::fmt::Debug>(v: T) -> String {
-    format!("{v:?}").to_lowercase()
 }
 
 /// Formats the table of `rows` (one line each), as `semloc ablate` and `semloc demo` print it.
@@ -121,8 +119,8 @@ pub fn table(rows: &[Row]) -> String {
         let _ = writeln!(
             s,
             "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9.0}{:>11}",
-            lower(r.semantics),
-            lower(r.assoc),
+            r.semantics.name(),
+            association_name(r.assoc),
             f(e.map(|e| e.ate_rmse_m), 3),
             f(e.map(|e| 100.0 * e.ate_rmse_m / e.path_length_m.max(1e-9)), 2),
             f(e.and_then(|e| e.t_rel_pct), 3),
@@ -137,32 +135,31 @@ pub fn table(rows: &[Row]) -> String {
     s
 }
 
-/// Tracks `seq` once per (semantics, assoc) pair with everything else equal; each row's
-/// outputs go to `out/<semantics>-<assoc>/`. A row whose tracking stops early is an error
-/// naming the row (its outputs so far are kept).
-pub fn run_rows(
-    seq: &Sequence,
-    base: &RunConfig,
-    pairs: &[(SemanticsArg, AssocArg)],
+/// Tracks once per (semantics, assoc) pair, each row configured as `base()` makes it but for
+/// those two; each row's outputs go to `out/<semantics>-<assoc>/`. A row whose tracking stops
+/// early is an error naming the row (its outputs so far are kept).
+pub fn run_rows<'a>(
+    base: &dyn Fn() -> RunConfig<'a>,
+    pairs: &[(Semantics, Association)],
     out: &std::path::Path,
 ) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     for &(semantics, assoc) in pairs {
-        let cfg = RunConfig {
-            semantics,
-            assoc,
+        let (s, a) = (semantics.name(), association_name(assoc));
+        let dir = out.join(format!("{s}-{a}"));
+        let mut cfg = base();
+        cfg.out = dir.clone();
+        cfg.semantics = semantics;
+        cfg.tracker.association = assoc;
+        if semantics == Semantics::Off {
             // the network is only needed (and only timed) where labels are used
-            model: if semantics == SemanticsArg::Off { None } else { base.model.clone() },
-            ..base.clone()
-        };
-        let dir = out.join(format!("{}-{}", lower(semantics), lower(assoc)));
-        eprintln!("{} / {} ...", lower(semantics), lower(assoc));
-        let outcome = execute(seq, &cfg, &dir)?;
+            cfg.network = None;
+        }
+        eprintln!("{s} / {a} ...");
+        let outcome = run_with_progress(cfg)?;
         if let Some(e) = &outcome.failure {
             anyhow::bail!(
-                "semantics {} / assoc {} stopped after {} frames: {e} (outputs so far in {})",
-                lower(semantics),
-                lower(assoc),
+                "semantics {s} / assoc {a} stopped after {} frames: {e} (outputs so far in {})",
                 outcome.summary.frames_processed,
                 dir.display()
             );
@@ -178,10 +175,7 @@ fn feature_share(seq: &Sequence, model: Option<&PathBuf>, n: usize) -> Result<Sh
     let (w, h) = seq.image_size;
     let mut pipe = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), 1)?;
     if let Some(p) = model {
-        let seg = semloc::nn::segment::Segmenter::new(semloc::nn::SlmBlob::load(p)?)?;
-        seg.letterbox(w as usize, h as usize)
-            .with_context(|| format!("{} on {w}x{h} frames", p.display()))?;
-        pipe.set_segmenter(seg);
+        pipe.set_segmenter(semloc::run::load_network(p, w, h)?);
     }
     let (mut plain, mut semantic) = (CategoryCounts::default(), CategoryCounts::default());
     let pb = super::progress(n as u64, "Fig. 4");
@@ -216,19 +210,20 @@ pub fn run(args: &AblateArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output folder {}", args.out.display()))?;
-    let base = RunConfig {
-        threads: args.threads,
-        ransac_iterations: TrackerParams::default().ransac_iterations,
-        semantics: SemanticsArg::Off,
-        assoc: AssocArg::Hard,
-        align: args.align,
+    let base = || RunConfig {
         max_frames: args.max_frames,
-        model: args.model.clone(),
+        threads: args.threads,
+        network: args.model.clone().map(Network::File),
+        align: args.align.into(),
+        ..RunConfig::new(&seq, &args.out)
     };
-    let pairs: Vec<(SemanticsArg, AssocArg)> =
-        args.semantics.iter().flat_map(|&s| args.assoc.iter().map(move |&a| (s, a))).collect();
-    let rows = run_rows(&seq, &base, &pairs, &args.out)?;
-    let n = args.max_frames.map_or(seq.len(), |m| m.min(seq.len()));
+    let pairs: Vec<(Semantics, Association)> = args
+        .semantics
+        .iter()
+        .flat_map(|&s| args.assoc.iter().map(move |&a| (s.into(), a.into())))
+        .collect();
+    let rows = run_rows(&base, &pairs, &args.out)?;
+    let n = base().frame_count();
     let share = if labelled { Some(feature_share(&seq, args.model.as_ref(), n)?) } else { None };
 
     let mut text = format!(
@@ -261,8 +256,10 @@ pub fn run(args: &AblateArgs) -> Result<()> {
     print!("{text}");
     let p = args.out.join("ablation.txt");
     std::fs::write(&p, &text).with_context(|| format!("writing {}", p.display()))?;
-    let folders: Vec<String> =
-        rows.iter().map(|r| format!("{}-{}", lower(r.semantics), lower(r.assoc))).collect();
+    let folders: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{}-{}", r.semantics.name(), association_name(r.assoc)))
+        .collect();
     let json_rows: Vec<JsonRow<'_>> = rows
         .iter()
         .zip(&folders)
@@ -270,8 +267,8 @@ pub fn run(args: &AblateArgs) -> Result<()> {
             let e = r.outcome.eval.as_ref();
             let c = r.outcome.summary.timing.get("compute");
             JsonRow {
-                semantics: lower(r.semantics),
-                association: lower(r.assoc),
+                semantics: r.semantics.name().to_owned(),
+                association: association_name(r.assoc),
                 ate_rmse_m: e.map(|e| e.ate_rmse_m),
                 t_rel_pct: e.and_then(|e| e.t_rel_pct),
                 r_rel_deg_per_100m: e.and_then(|e| e.r_rel_deg_per_100m),

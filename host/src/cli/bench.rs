@@ -8,13 +8,13 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use image::GrayImage;
-use semloc::pipeline::{FrameOutput, Pipeline, BIG_STACK_BYTES};
+use semloc::pipeline::{MemoryFrames, Pipeline, BIG_STACK_BYTES};
+use semloc::run::{percentiles, stats::stage_percentiles, track_frames, FrameRecord, Percentiles};
 use semloc_core::image::ImageView;
 use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
 use semloc_core::tracker::TrackerParams;
 
 use super::info::DatasetArgs;
-use super::run::{percentiles, Percentiles};
 
 /// Arguments of `semloc bench`.
 #[derive(Args, Debug)]
@@ -94,16 +94,18 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         bail!("{}: no frames to time", seq.root.display());
     }
     let pb = super::progress(n as u64, "loading");
-    let mut frames: Vec<(GrayImage, GrayImage)> = Vec::with_capacity(n);
+    let (mut lefts, mut rights) = (Vec::with_capacity(n), Vec::with_capacity(n));
     for i in 0..n {
-        frames.push(seq.load_luma(i)?);
+        let (l, r) = seq.load_luma(i)?;
+        lefts.push(l);
+        rights.push(r);
         pb.inc(1);
     }
     pb.finish_and_clear();
     let (w, h) = seq.image_size;
     let repeat = args.repeat.max(1);
     let seg = match (&args.model, &args.onnx) {
-        (Some(m), Some(o)) => Some(seg_times(m, o, &frames, repeat)?),
+        (Some(m), Some(o)) => Some(seg_times(m, o, &lefts, repeat)?),
         _ => None,
     };
     if let (true, Some(s)) = (args.seg_only, &seg) {
@@ -118,7 +120,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
 
     // ORB alone, one thread, left images.
-    let lefts: Vec<GrayImage> = frames.iter().map(|f| f.0.clone()).collect();
+    let orb_lefts = lefts.clone();
     let orb_ms = std::thread::Builder::new()
         .stack_size(BIG_STACK_BYTES)
         .spawn(move || -> Result<Vec<f64>> {
@@ -126,7 +128,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             ex.configure(OrbConfig::KITTI)?;
             let mut times = Vec::new();
             for _ in 0..repeat {
-                for img in &lefts {
+                for img in &orb_lefts {
                     let view = ImageView::from_slice(
                         img.as_raw(),
                         img.width() as usize,
@@ -143,21 +145,28 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         .map_err(|_| anyhow::anyhow!("ORB timing thread panicked"))??;
     let orb = percentiles(&orb_ms);
 
-    let opencv = if args.no_opencv { None } else { opencv_reference(args, &frames, repeat)? };
+    let opencv = if args.no_opencv { None } else { opencv_reference(args, &lefts, repeat)? };
     let ratio = opencv.as_ref().and_then(|v| v["median_ms"].as_f64()).map(|cv| orb.median_ms / cv);
 
     // Whole pipeline: one thread (reference) then two, same frames, fresh tracker each.
-    let one = pipeline_times(&seq, &frames, w, h, 1)?;
-    let two = pipeline_times(&seq, &frames, w, h, 2)?;
-    let stage_table = |outs: &[FrameOutput]| {
-        let col = |f: fn(&FrameOutput) -> f64| -> Vec<f64> { outs.iter().map(f).collect() };
-        let mut m = std::collections::BTreeMap::new();
-        m.insert("orb_left", percentiles(&col(|o| o.times.orb_left_ms)));
-        m.insert("orb_right", percentiles(&col(|o| o.times.orb_right_ms)));
-        m.insert("extract_wall", percentiles(&col(|o| o.times.extract_wall_ms)));
-        m.insert("stereo", percentiles(&col(|o| o.times.stereo_ms)));
-        m.insert("track", percentiles(&col(|o| o.times.track_ms)));
-        m.insert("frame", percentiles(&col(|o| o.times.compute_ms)));
+    let frames = MemoryFrames {
+        left: &lefts,
+        right: &rights,
+        labels: None,
+        first_index: 0,
+        times_s: &seq.times_s,
+    };
+    let one = pipeline_times(&seq, &frames, 1)?;
+    let two = pipeline_times(&seq, &frames, 2)?;
+    // `semloc run`'s stages without loading (the frames are in memory); `frame` is `compute`
+    let stage_table = |records: &[FrameRecord]| {
+        let all = stage_percentiles(records, false);
+        let mut m: std::collections::BTreeMap<&'static str, Percentiles> =
+            ["orb_left", "orb_right", "extract_wall", "stereo", "track"]
+                .into_iter()
+                .filter_map(|k| Some((k, *all.get(k)?)))
+                .collect();
+        m.insert("frame", all.get("compute").copied().unwrap_or_default());
         m
     };
     let (t1, t2) = (stage_table(&one), stage_table(&two));
@@ -187,7 +196,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 fn seg_times(
     model: &std::path::Path,
     onnx: &std::path::Path,
-    frames: &[(GrayImage, GrayImage)],
+    lefts: &[GrayImage],
     repeat: usize,
 ) -> Result<SegBench> {
     use semloc::nn::convert::kind_name;
@@ -219,9 +228,9 @@ fn seg_times(
     };
     let mut factor = 0;
     let (mut t8, mut t32) = (Vec::new(), Vec::new());
-    let pb = super::progress((frames.len() * repeat) as u64, "seg bench");
+    let pb = super::progress((lefts.len() * repeat) as u64, "seg bench");
     for _ in 0..repeat {
-        for (left, _) in frames {
+        for left in lefts {
             let (lb, _) = seg.prepare(left)?;
             factor = lb.factor;
             let mut frame: BTreeMap<&'static str, f64> = BTreeMap::new();
@@ -290,31 +299,30 @@ fn print_seg(s: &SegBench) {
     }
 }
 
+/// Tracks the in-memory `frames` with a fresh pipeline on `threads` threads.
 fn pipeline_times(
     seq: &semloc::dataset::Sequence,
-    frames: &[(GrayImage, GrayImage)],
-    w: u32,
-    h: u32,
+    frames: &MemoryFrames<'_>,
     threads: usize,
-) -> Result<Vec<FrameOutput>> {
+) -> Result<Vec<FrameRecord>> {
+    let (w, h) = seq.image_size;
     let mut p = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), threads)?;
-    let mut outs = Vec::with_capacity(frames.len());
-    for (i, (l, r)) in frames.iter().enumerate() {
-        let ts = seq.times_s.get(i).copied().unwrap_or(i as f64 * 0.1);
-        outs.push(p.process_images(l, r, i, ts)?);
+    let tracked = track_frames(&mut p, frames, frames.left.len(), &mut |_| {});
+    match tracked.failure {
+        Some(e) => Err(e.into()),
+        None => Ok(tracked.frames),
     }
-    Ok(outs)
 }
 
 /// Times OpenCV's ORB on the same luma frames (written as PGM) through the bundled script.
 fn opencv_reference(
     args: &BenchArgs,
-    frames: &[(GrayImage, GrayImage)],
+    lefts: &[GrayImage],
     repeat: usize,
 ) -> Result<Option<serde_json::Value>> {
     let dir = tempfile_dir()?;
     let mut paths = Vec::new();
-    for (i, (l, _)) in frames.iter().enumerate() {
+    for (i, l) in lefts.iter().enumerate() {
         let p = dir.join(format!("{i:06}.pgm"));
         write_pgm(&p, l)?;
         paths.push(p);

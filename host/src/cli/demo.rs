@@ -7,11 +7,11 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use semloc::dataset::Sequence;
+use semloc::run::{Network, RunConfig, Semantics};
 use semloc::synth::{generate, Dynamics, SynthConfig};
+use semloc_core::assoc::Association;
 
 use super::ablate::{run_rows, table};
-use super::eval::AlignArg;
-use super::run::{AssocArg, RunConfig, SemanticsArg};
 
 /// Arguments of `semloc demo`.
 #[derive(Args, Debug)]
@@ -70,18 +70,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         t.elapsed().as_secs_f64()
     );
     let seq = Sequence::open_odometry(&data, &cfg.seq, None)?;
-    let base = RunConfig {
-        threads: 2,
-        ransac_iterations: semloc_core::tracker::TrackerParams::default().ransac_iterations,
-        semantics: SemanticsArg::Off,
-        assoc: AssocArg::Hard,
-        align: AlignArg::Se3,
-        max_frames: None,
-        model: args.model.clone(),
+    // `semloc run`'s defaults (two threads, SE(3) alignment, every frame) for every row
+    let base = || RunConfig {
+        network: args.model.clone().map(Network::File),
+        ..RunConfig::new(&seq, &out)
     };
-    let pairs =
-        [SemanticsArg::Off, SemanticsArg::Cull, SemanticsArg::Full].map(|s| (s, AssocArg::Hard));
-    let rows = run_rows(&seq, &base, &pairs, &out)?;
+    let pairs = [Semantics::Off, Semantics::Cull, Semantics::Full].map(|s| (s, Association::Hard));
+    let rows = run_rows(&base, &pairs, &out)?;
     println!();
     print!("{}", table(&rows));
     println!();

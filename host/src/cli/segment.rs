@@ -10,9 +10,8 @@ use semloc::dataset::luma::load_luma_file;
 use semloc::nn::segment::{label_image, overlay, to_frame, Segmenter};
 use semloc::nn::tract_ref::TractRef;
 use semloc::nn::SlmBlob;
+use semloc::run::percentiles;
 use semloc_core::nn::graph::Kernels;
-
-use super::run::percentiles;
 
 /// Arguments of `semloc segment`.
 #[derive(Args, Debug)]

@@ -17,10 +17,10 @@ use semloc::nn::metrics::{Confusion, CATEGORIES};
 use semloc::nn::segment::{to_frame, Segmenter};
 use semloc::nn::tract_ref::TractRef;
 use semloc::nn::{NnFileError, SlmBlob};
+use semloc::run::{percentiles, Percentiles};
 use semloc_core::nn::graph::Kernels;
 use semloc_core::seg::{CLASS_NAMES, VOID};
 
-use super::run::{percentiles, Percentiles};
 use super::segment::list_images;
 
 /// Arguments of `semloc verify-seg`.

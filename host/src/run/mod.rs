@@ -1,0 +1,329 @@
+//! One tracking run over a sequence, as `semloc run`, `ablate` and `demo` do it, and as tests
+//! and benches drive it: a typed [`RunConfig`] in, a [`RunResult`] (per-frame records,
+//! summary, optional evaluation) out, with every output file written on the way
+//! ([`outputs`]: `trajectory.txt`, `trajectory_tum.txt`, `frames.csv`, `summary.json`, and with
+//! ground truth `eval.json` and `plots/`).
+//!
+//! The frames go through [`Pipeline`] in order; a frame that fails ends the run, and what was
+//! computed before it is still written and evaluated (the failure is returned, not raised), so
+//! a corrupt image late in a drive never costs the trajectory up to it. Evaluation follows the
+//! paper's protocol (§4: KITTI devkit t_rel/r_rel, Umeyama-aligned ATE; see [`crate::eval`]).
+//!
+//! Memory: the pipeline's fixed core state ([`Pipeline::memory_bytes`], ≈ 11 MiB), the
+//! network's when one is set, and one [`FrameRecord`] per frame (a few hundred bytes) kept for
+//! the outputs and the caller.
+
+pub mod outputs;
+pub mod stats;
+
+use std::path::{Path, PathBuf};
+
+use semloc_core::assoc::Association;
+use semloc_core::geom::Se3;
+use semloc_core::seg::WeightScheme;
+use semloc_core::tracker::TrackerParams;
+
+use crate::dataset::Sequence;
+use crate::eval::{Align, EvalError, EvalReport};
+use crate::nn::segment::Segmenter;
+use crate::nn::{NnFileError, SlmBlob};
+use crate::pipeline::{FrameOutput, FrameSource, Pipeline, PipelineError};
+
+pub use outputs::{EvalSummary, Summary, FRAMES_CSV_HEADER};
+pub use stats::{percentiles, Percentiles};
+
+/// Semantic weighting of left-image features (the paper's §3.1).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub enum Semantics {
+    /// No semantics: the geometric backbone.
+    #[default]
+    Off,
+    /// Cull features on dynamic classes.
+    Cull,
+    /// Cull dynamic classes and weight construction/object classes ×3 (semantic ORB, Eq. 2).
+    Full,
+}
+
+impl Semantics {
+    /// The core weight scheme, if any.
+    pub fn scheme(self) -> Option<WeightScheme> {
+        match self {
+            Self::Off => None,
+            Self::Cull => Some(WeightScheme::Cull),
+            Self::Full => Some(WeightScheme::Full),
+        }
+    }
+
+    /// The setting's name in `summary.json` and tables: `off`, `cull`, `full`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Cull => "cull",
+            Self::Full => "full",
+        }
+    }
+}
+
+/// The association's name in `summary.json` and tables: `hard`, `em`.
+pub fn association_name(a: Association) -> String {
+    format!("{a:?}").to_lowercase()
+}
+
+/// The int8 segmentation network that labels the left frames.
+pub enum Network {
+    /// Loaded from this `.slm` file (`semloc convert`) when the run starts.
+    File(PathBuf),
+    /// Already loaded.
+    Loaded(Box<Segmenter>),
+}
+
+/// How one run is configured.
+pub struct RunConfig<'a> {
+    /// The sequence, already opened.
+    pub seq: &'a Sequence,
+    /// Output folder (created with its parents).
+    pub out: PathBuf,
+    /// Frames to process at most (from the first).
+    pub max_frames: Option<usize>,
+    /// Worker threads: 1, or 2 to extract left and right in parallel; results are identical.
+    pub threads: u8,
+    /// Tracker parameters, the association among them.
+    pub tracker: TrackerParams,
+    /// Semantic weighting.
+    pub semantics: Semantics,
+    /// The network that labels frames; without one, semantics use the sequence's `semantic/`
+    /// labels (as `semloc synth` writes them).
+    pub network: Option<Network>,
+    /// ATE alignment of the evaluation.
+    pub align: Align,
+}
+
+impl<'a> RunConfig<'a> {
+    /// `semloc run`'s defaults: two threads, default tracker (hard association), no semantics,
+    /// no network, SE(3) alignment, every frame.
+    pub fn new(seq: &'a Sequence, out: impl Into<PathBuf>) -> Self {
+        Self {
+            seq,
+            out: out.into(),
+            max_frames: None,
+            threads: 2,
+            tracker: TrackerParams::default(),
+            semantics: Semantics::Off,
+            network: None,
+            align: Align::Se3,
+        }
+    }
+
+    /// How many frames the run will process.
+    pub fn frame_count(&self) -> usize {
+        self.max_frames.map_or(self.seq.len(), |m| m.min(self.seq.len()))
+    }
+}
+
+/// One processed frame.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameRecord {
+    /// The frame's timestamp (s), as written to `trajectory_tum.txt` and `frames.csv`.
+    pub timestamp_s: f64,
+    /// What the pipeline returned for it.
+    pub output: FrameOutput,
+}
+
+/// What one run produced (everything in it is also in the output folder).
+#[derive(Debug)]
+pub struct RunResult {
+    /// One record per processed frame, in order.
+    pub frames: Vec<FrameRecord>,
+    /// The content of `summary.json`.
+    pub summary: Summary,
+    /// The content of `eval.json`, when the sequence has ground truth (and ≥ 3 frames ran).
+    pub eval: Option<EvalReport>,
+    /// The error of the frame that ended the run early, if one did.
+    pub failure: Option<PipelineError>,
+}
+
+impl RunResult {
+    /// The estimated camera-to-world poses, one per processed frame.
+    pub fn poses(&self) -> Vec<Se3> {
+        self.frames.iter().map(|r| r.output.report.t_wc).collect()
+    }
+}
+
+/// Why a run could not start or its outputs could not be written. A frame that fails is not
+/// one of these: see [`RunResult::failure`].
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// The output folder could not be created.
+    #[error("creating output folder {}", path.display())]
+    OutputFolder {
+        /// The folder.
+        path: PathBuf,
+        /// The operating system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An output file or folder could not be created.
+    #[error("creating {}", path.display())]
+    Create {
+        /// The file or folder.
+        path: PathBuf,
+        /// The operating system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An output file could not be written.
+    #[error("writing {}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The pipeline could not be built.
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+    /// The network file could not be loaded.
+    #[error(transparent)]
+    Network(#[from] NnFileError),
+    /// The network's input cannot take the sequence's frames.
+    #[error("{} on {width}x{height} frames", path.display())]
+    NetworkInput {
+        /// The network file.
+        path: PathBuf,
+        /// Frame width (px).
+        width: u32,
+        /// Frame height (px).
+        height: u32,
+        /// Why the letterbox does not fit.
+        #[source]
+        source: Box<NnFileError>,
+    },
+    /// Semantics are on but nothing labels the frames.
+    #[error(
+        "--semantics {semantics:?} needs labels: give the network with --model FILE.slm, or a \
+         sequence with a {} folder (synthetic sequences from `semloc synth` have one)",
+        folder.display()
+    )]
+    NoLabels {
+        /// The semantic setting asked for.
+        semantics: Semantics,
+        /// The label folder the sequence lacks.
+        folder: PathBuf,
+    },
+    /// A trajectory file could not be written.
+    #[error(transparent)]
+    Trajectory(#[from] crate::traj::TrajError),
+    /// The trajectory could not be evaluated.
+    #[error("evaluating the estimated trajectory")]
+    Eval(#[source] EvalError),
+    /// A plot could not be written.
+    #[error(transparent)]
+    Plot(#[from] crate::plot::PlotError),
+    /// A JSON output could not be serialised.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+}
+
+/// Loads the network in `path` and checks that it takes `width`x`height` frames.
+pub fn load_network(path: &Path, width: u32, height: u32) -> Result<Segmenter, RunError> {
+    let seg = Segmenter::new(SlmBlob::load(path)?)?;
+    check_network_input(&seg, width, height)?;
+    Ok(seg)
+}
+
+fn check_network_input(seg: &Segmenter, width: u32, height: u32) -> Result<(), RunError> {
+    match seg.letterbox(width as usize, height as usize) {
+        Ok(_) => Ok(()),
+        Err(source) => Err(RunError::NetworkInput {
+            path: seg.blob().path().to_path_buf(),
+            width,
+            height,
+            source: Box::new(source),
+        }),
+    }
+}
+
+/// Frames tracked by [`track_frames`].
+#[derive(Debug)]
+pub struct Tracked {
+    /// One record per frame processed, in order.
+    pub frames: Vec<FrameRecord>,
+    /// The error of the frame that stopped the loop, if one did.
+    pub failure: Option<PipelineError>,
+}
+
+/// Feeds frames `0..n` of `src` through `pipe` in order, calling `on_frame` after each; stops
+/// at the first frame that fails and returns its error with the frames before it.
+pub fn track_frames(
+    pipe: &mut Pipeline,
+    src: &(impl FrameSource + ?Sized),
+    n: usize,
+    on_frame: &mut dyn FnMut(&FrameRecord),
+) -> Tracked {
+    let mut frames = Vec::with_capacity(n);
+    for i in 0..n {
+        match pipe.process_frame(src, i) {
+            Ok(output) => {
+                let record = FrameRecord { timestamp_s: src.timestamp_s(i), output };
+                on_frame(&record);
+                frames.push(record);
+            }
+            Err(e) => return Tracked { frames, failure: Some(e) },
+        }
+    }
+    Tracked { frames, failure: None }
+}
+
+/// Runs `cfg` and writes its outputs; see [`run_observed`].
+pub fn run(cfg: RunConfig<'_>) -> Result<RunResult, RunError> {
+    run_observed(cfg, &mut |_| {})
+}
+
+/// Tracks `cfg.seq` as configured, calling `on_frame` after each frame (for progress), then
+/// writes every output into `cfg.out` and returns what was written. A frame that fails ends
+/// the run; everything before it is still written and evaluated, and the error is in
+/// [`RunResult::failure`].
+pub fn run_observed(
+    cfg: RunConfig<'_>,
+    on_frame: &mut dyn FnMut(&FrameRecord),
+) -> Result<RunResult, RunError> {
+    let n = cfg.frame_count();
+    let RunConfig { seq, out, max_frames: _, threads, tracker, semantics, network, align } = cfg;
+    std::fs::create_dir_all(&out)
+        .map_err(|source| RunError::OutputFolder { path: out.clone(), source })?;
+    let (w, h) = seq.image_size;
+    let mut pipe = Pipeline::new(&seq.calib, w, h, tracker, usize::from(threads))?;
+    let segment_timed = network.is_some() && semantics != Semantics::Off;
+    match network {
+        Some(Network::File(p)) => pipe.set_segmenter(load_network(&p, w, h)?),
+        Some(Network::Loaded(seg)) => {
+            check_network_input(&seg, w, h)?;
+            pipe.set_segmenter(*seg);
+        }
+        None if semantics != Semantics::Off && !seq.has_labels() => {
+            return Err(RunError::NoLabels { semantics, folder: seq.root.join("semantic") });
+        }
+        None => {}
+    }
+    pipe.set_semantics(semantics.scheme());
+    let Tracked { frames, failure } = track_frames(&mut pipe, seq, n, on_frame);
+    // Write what exists before reporting a failure: never lose output already computed.
+    outputs::write_frame_outputs(&out, &frames)?;
+    let poses: Vec<Se3> = frames.iter().map(|r| r.output.report.t_wc).collect();
+    let eval = outputs::write_eval(&out, seq.gt.as_deref(), &poses, align)?;
+    let inputs = outputs::SummaryInputs {
+        seq,
+        threads,
+        semantics: semantics.name(),
+        association: tracker.association,
+        segment_timed,
+        stats: pipe.tracker().stats(),
+        core_memory_bytes: Pipeline::memory_bytes(),
+        network_memory_bytes: pipe.segmenter().map_or(0, Segmenter::memory_bytes),
+    };
+    let summary = outputs::summarise(&frames, &inputs, eval.as_ref());
+    outputs::write_json(&out.join("summary.json"), &summary)?;
+    Ok(RunResult { frames, summary, eval, failure })
+}

@@ -1,0 +1,190 @@
+//! The files of a run and the `summary.json` schema: `trajectory.txt` (KITTI poses),
+//! `trajectory_tum.txt`, `frames.csv` (one row of stage timings and counters per frame),
+//! `summary.json`, and with ground truth `eval.json` and `plots/`.
+//!
+//! Field names are the file's keys and columns; they are a published format (README, scripts
+//! in `models/` and CI read them), so they change only with a note there. Memory: the text of
+//! one trajectory file at a time (about 200 bytes per frame).
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+
+use semloc_core::geom::Se3;
+use semloc_core::tracker::TrackerStats;
+
+use super::stats::{column, median, stage_percentiles, Percentiles};
+use super::{association_name, FrameRecord, RunError};
+use crate::dataset::{DatasetSummary, Sequence};
+use crate::eval::{evaluate, Align, EvalReport};
+
+/// Header line of `frames.csv`; [`write_frames_csv`] writes one row of these columns per frame.
+pub const FRAMES_CSV_HEADER: &str = "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,\
+    extract_wall_ms,stereo_ms,track_ms,seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,\
+    keyframe,lost,initialised,landmarks,keyframes,ba_iterations,culled,em_changed";
+
+/// What `summary.json` holds.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[allow(missing_docs)] // field names are the JSON keys; see the README
+pub struct Summary {
+    pub dataset: DatasetSummary,
+    pub frames_processed: usize,
+    pub threads: u8,
+    pub keyframes: u32,
+    pub lost: u32,
+    pub landmark_overflow: u32,
+    pub core_memory_bytes: usize,
+    pub network_memory_bytes: usize,
+    pub median_stereo_matches: f64,
+    pub median_inliers: f64,
+    pub semantics: String,
+    pub association: String,
+    pub median_culled: f64,
+    pub em_changed_total: u64,
+    pub timing: BTreeMap<&'static str, Percentiles>,
+    pub eval: Option<EvalSummary>,
+}
+
+/// The evaluation figures inside `summary.json`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[allow(missing_docs)]
+pub struct EvalSummary {
+    pub align: String,
+    pub ate_rmse_m: f64,
+    pub t_rel_pct: Option<f64>,
+    pub r_rel_deg_per_100m: Option<f64>,
+    pub path_length_m: f64,
+}
+
+impl From<&EvalReport> for EvalSummary {
+    fn from(e: &EvalReport) -> Self {
+        Self {
+            align: e.align.to_string(),
+            ate_rmse_m: e.ate_rmse_m,
+            t_rel_pct: e.t_rel_pct,
+            r_rel_deg_per_100m: e.r_rel_deg_per_100m,
+            path_length_m: e.path_length_m,
+        }
+    }
+}
+
+/// What [`Summary`] is made of besides the records.
+pub(super) struct SummaryInputs<'a> {
+    pub seq: &'a Sequence,
+    pub threads: u8,
+    pub semantics: &'static str,
+    pub association: semloc_core::assoc::Association,
+    /// The `segment` timing row is reported (a network labelled the frames).
+    pub segment_timed: bool,
+    pub stats: TrackerStats,
+    pub core_memory_bytes: usize,
+    pub network_memory_bytes: usize,
+}
+
+/// Builds `summary.json`'s content.
+pub(super) fn summarise(
+    frames: &[FrameRecord],
+    inputs: &SummaryInputs<'_>,
+    eval: Option<&EvalReport>,
+) -> Summary {
+    let counter = |f: fn(&FrameRecord) -> f64| median(column(frames, f));
+    Summary {
+        dataset: inputs.seq.summary(),
+        frames_processed: frames.len(),
+        threads: inputs.threads,
+        keyframes: inputs.stats.keyframes,
+        lost: inputs.stats.lost,
+        landmark_overflow: inputs.stats.landmark_overflow,
+        core_memory_bytes: inputs.core_memory_bytes,
+        network_memory_bytes: inputs.network_memory_bytes,
+        median_stereo_matches: counter(|r| f64::from(r.output.stereo.matched)),
+        median_inliers: counter(|r| f64::from(r.output.report.inliers)),
+        semantics: inputs.semantics.to_owned(),
+        association: association_name(inputs.association),
+        em_changed_total: frames.iter().map(|r| u64::from(r.output.report.em_changed)).sum(),
+        median_culled: counter(|r| f64::from(r.output.culled)),
+        timing: stage_percentiles(frames, inputs.segment_timed),
+        eval: eval.map(EvalSummary::from),
+    }
+}
+
+/// Writes `trajectory.txt`, `trajectory_tum.txt` and `frames.csv` of `frames` into `out`.
+pub fn write_frame_outputs(out: &Path, frames: &[FrameRecord]) -> Result<(), RunError> {
+    let poses: Vec<Se3> = frames.iter().map(|r| r.output.report.t_wc).collect();
+    crate::traj::write_kitti(out.join("trajectory.txt"), &poses)?;
+    let tum: Vec<(f64, Se3)> =
+        frames.iter().map(|r| (r.timestamp_s, r.output.report.t_wc)).collect();
+    crate::traj::write_tum(out.join("trajectory_tum.txt"), &tum)?;
+    write_frames_csv(&out.join("frames.csv"), frames)
+}
+
+/// Writes `frames.csv`: [`FRAMES_CSV_HEADER`], then one row per frame (times in ms with three
+/// decimals, timestamp with six, flags as 0/1).
+pub fn write_frames_csv(path: &Path, frames: &[FrameRecord]) -> Result<(), RunError> {
+    let file = std::fs::File::create(path)
+        .map_err(|source| RunError::Create { path: path.to_path_buf(), source })?;
+    let mut f = std::io::BufWriter::new(file);
+    let written = (|| -> std::io::Result<()> {
+        writeln!(f, "{FRAMES_CSV_HEADER}")?;
+        for r in frames {
+            let (o, t) = (&r.output, r.timestamp_s);
+            let (s, rep) = (o.times, o.report);
+            writeln!(
+                f,
+                "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
+                rep.frame_index,
+                s.load_ms,
+                s.orb_left_ms,
+                s.orb_right_ms,
+                s.extract_wall_ms,
+                s.stereo_ms,
+                s.track_ms,
+                s.seg_ms,
+                s.compute_ms,
+                s.total_ms,
+                o.stereo.matched,
+                rep.matched,
+                rep.inliers,
+                u8::from(rep.keyframe),
+                u8::from(rep.lost),
+                u8::from(rep.initialised),
+                rep.landmarks,
+                rep.keyframes,
+                rep.ba_iterations,
+                o.culled,
+                rep.em_changed
+            )?;
+        }
+        f.flush()
+    })();
+    written.map_err(|source| RunError::Write { path: path.to_path_buf(), source })
+}
+
+/// Evaluates `poses` against the first `poses.len()` ground-truth poses and writes `eval.json`
+/// and `plots/` into `out`; `None` (and nothing written) without ground truth or with fewer
+/// than three poses, where no alignment is defined.
+pub fn write_eval(
+    out: &Path,
+    gt: Option<&[Se3]>,
+    poses: &[Se3],
+    align: Align,
+) -> Result<Option<EvalReport>, RunError> {
+    let gt = match gt {
+        Some(gt) if poses.len() >= 3 => &gt[..poses.len()],
+        _ => return Ok(None),
+    };
+    let report = evaluate(gt, poses, align).map_err(RunError::Eval)?;
+    write_json(&out.join("eval.json"), &report)?;
+    let plots = out.join("plots");
+    std::fs::create_dir_all(&plots)
+        .map_err(|source| RunError::Create { path: plots.clone(), source })?;
+    crate::plot::write_eval_plots(&plots, gt, &report)?;
+    Ok(Some(report))
+}
+
+/// Writes `value` as pretty-printed JSON to `path`.
+pub(super) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), RunError> {
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text)
+        .map_err(|source| RunError::Write { path: path.to_path_buf(), source })
+}
