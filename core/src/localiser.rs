@@ -312,20 +312,26 @@ impl Localiser {
     /// straight into the localiser's label image, then as [`Self::set_labels`].
     ///
     /// # Errors
-    /// [`LocaliserError::FrameSize`] when the network stage was built for another frame size
-    /// or `left` is not one frame; [`LocaliserError::Model`] when the network fails.
+    /// [`LocaliserError::FrameSize`] when the network stage was built for another frame size,
+    /// [`LocaliserError::Image`] when `left` is shorter than one frame,
+    /// [`LocaliserError::Model`] when the network fails.
     pub fn label_with(
         &mut self,
         network: &mut Network<'_>,
         left: &[u8],
     ) -> Result<(), LocaliserError> {
         let n = self.width * self.height;
-        if network.frame_size() != (self.width, self.height) || left.len() != n {
+        if network.frame_size() != (self.width, self.height) {
             return Err(LocaliserError::FrameSize {
                 expected: (self.width, self.height),
                 got: network.frame_size(),
             });
         }
+        // As an `ImageView`: a longer buffer is read up to the frame, a shorter one refused.
+        let left = left.get(..n).ok_or(LocaliserError::Image(ImageError::BufferTooSmall {
+            need: n,
+            got: left.len(),
+        }))?;
         self.sem.labelled = false;
         network.label(left, &mut self.sem.labels[..n])?;
         self.sem.labelled = true;
@@ -454,7 +460,7 @@ impl Localiser {
         let l = ImageView::from_slice(left, w, h).map_err(LocaliserError::Image)?;
         let r = ImageView::from_slice(right, w, h).map_err(LocaliserError::Image)?;
         if let Some(net) = network {
-            self.label_with(net, &left[..w * h])?;
+            self.label_with(net, left)?;
         }
         self.extract(&l, &r)?;
         self.match_stereo(timestamp_s)

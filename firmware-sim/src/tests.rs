@@ -191,3 +191,37 @@ fn segmentation_memory_figures() {
     println!("model {} bytes, arena/map {need:?}", embedded::MODEL_BLOB.len());
     assert_eq!(m.input_size(), (HEIGHT, WIDTH));
 }
+
+#[test]
+fn network_labelling_names_a_short_buffer_and_a_mismatched_stage() {
+    on_big_stack(|| {
+        let mut loc = Box::new(
+            crate::embedded_localiser(crate::semantic_params(), Some(crate::SEMANTIC_SCHEME))
+                .expect("loc"),
+        );
+        let mut storage = Box::new(crate::SegStorage::new());
+        let mut net = crate::Network::new(embedded::MODEL_BLOB, WIDTH, HEIGHT, storage.memory())
+            .expect("network");
+        let short = vec![0u8; WIDTH * HEIGHT - 1];
+        let r = loc.label_with(&mut net, &short);
+        assert!(
+            matches!(
+                r,
+                Err(crate::LocaliserError::Image(
+                    semloc_core::image::ImageError::BufferTooSmall { .. }
+                ))
+            ),
+            "{r:?}"
+        );
+        assert!(loc.labels().is_none(), "a refused frame leaves no labels");
+        // A stage for another frame size (half height, same network) is refused by size.
+        let mut storage2 = Box::new(crate::SegStorage::new());
+        let mut half =
+            crate::Network::new(embedded::MODEL_BLOB, WIDTH, HEIGHT / 2, storage2.memory());
+        if let Ok(half) = half.as_mut() {
+            let frame = vec![0u8; WIDTH * HEIGHT];
+            let r = loc.label_with(half, &frame);
+            assert!(matches!(r, Err(crate::LocaliserError::FrameSize { .. })), "{r:?}");
+        }
+    });
+}
