@@ -25,7 +25,7 @@ use crate::geom::{point_pose_jacobian, Se3, StereoCamera};
 use crate::math;
 
 /// Most keyframes a BA problem can hold (the sliding window's capacity).
-pub const MAX_WINDOW: usize = 10;
+pub const MAX_WINDOW: usize = 24;
 /// Size of the reduced camera system.
 const NP: usize = 6 * MAX_WINDOW;
 

@@ -32,7 +32,7 @@
 use super::{Candidate, Candidates, Matches, PoseProblem, MAX_CANDIDATES};
 use crate::frame::{Frame, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
-use crate::map::{measurement, Window, MAX_LANDMARKS, NO_LANDMARK};
+use crate::map::{measurement, Map, MAX_LANDMARKS, NO_LANDMARK};
 use crate::math;
 use crate::optim::{chi2, PoseObs, PoseOptParams};
 use crate::seg::{NUM_CLASSES, VOID};
@@ -115,13 +115,15 @@ pub(crate) struct EmInput<'a> {
     /// The frame (features and semantic descriptors).
     pub frame: &'a Frame,
     /// The window whose landmarks are the candidates.
-    pub window: &'a Window,
+    pub window: &'a Map,
     /// The camera.
     pub cam: &'a StereoCamera,
     /// EM settings.
     pub params: &'a EmParams,
     /// The ORB Hamming gate the null hypothesis sits at (the nearest-neighbour search's).
     pub null_max_hamming: u32,
+    /// Stereo points beyond this depth (m) are monocular measurements.
+    pub far_m: f32,
 }
 
 /// What one EM association did.
@@ -176,7 +178,7 @@ impl EmScratch {
                     }
                     let obs = PoseObs {
                         p_w: input.window.lm(id).p_w,
-                        z: measurement(&feats[j]),
+                        z: measurement(&feats[j], input.far_m),
                         weight: wk,
                     };
                     if !problem.push(obs, j) {
@@ -205,7 +207,7 @@ impl EmScratch {
                 continue;
             }
             let id = ids[best];
-            let z = measurement(&feats[j]);
+            let z = measurement(&feats[j], input.far_m);
             let pc = t_cw.transform_point(&input.window.lm(id).p_w);
             if !chi2(input.cam, &pc, &z).is_some_and(|s| s <= z.chi2_threshold()) {
                 continue;
@@ -292,7 +294,7 @@ fn candidate_log_likelihood(
     if !l.alive {
         return None;
     }
-    let z = measurement(f);
+    let z = measurement(f, input.far_m);
     let s = chi2(input.cam, &t_cw.transform_point(&l.p_w), &z)?;
     if s > 4.0 * z.chi2_threshold() {
         return None;
@@ -311,7 +313,7 @@ fn null_log_likelihood(input: &EmInput<'_>, j: usize) -> f64 {
     let f = &input.frame.features[j];
     let em = input.params;
     let mut ll =
-        -0.5 * measurement(f).chi2_threshold() - f64::from(input.null_max_hamming) / em.tau_orb;
+        -0.5 * measurement(f, input.far_m).chi2_threshold() - f64::from(input.null_max_hamming) / em.tau_orb;
     if f.class != VOID {
         ll += math::ln(1.0 / NUM_CLASSES as f64);
         if input.frame.sem[j].is_some() {

@@ -15,7 +15,7 @@
 use super::{Candidate, Candidates, Matches};
 use crate::frame::{hamming, level_scale, Feature, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
-use crate::map::{Window, NO_LANDMARK};
+use crate::map::{Map, NO_LANDMARK};
 use crate::math;
 
 /// Grid used to look up features near a projected landmark.
@@ -26,8 +26,9 @@ const GRID_CELLS: usize = GRID_COLS * GRID_ROWS;
 /// `ln(1.2)`, for predicting the pyramid level a landmark appears on.
 pub(crate) const LN_SCALE: f64 = 0.182_321_556_793_954_6;
 
-/// Features of the current frame bucketed by image cell (counting sort, no allocation).
-struct FeatureGrid {
+/// Features of one frame bucketed by image cell (counting sort, no allocation). Also used by
+/// local mapping over keyframe features.
+pub(crate) struct FeatureGrid {
     start: [u16; GRID_CELLS + 1],
     items: [u16; FRAME_CAPACITY],
     inv_cell_w: f32,
@@ -35,7 +36,7 @@ struct FeatureGrid {
 }
 
 impl FeatureGrid {
-    const fn new() -> Self {
+    pub(crate) const fn new() -> Self {
         Self {
             start: [0; GRID_CELLS + 1],
             items: [0; FRAME_CAPACITY],
@@ -44,13 +45,13 @@ impl FeatureGrid {
         }
     }
 
-    fn cell_of(&self, x: f32, y: f32) -> (usize, usize) {
+    pub(crate) fn cell_of(&self, x: f32, y: f32) -> (usize, usize) {
         let cx = (x * self.inv_cell_w) as isize;
         let cy = (y * self.inv_cell_h) as isize;
         (cx.clamp(0, GRID_COLS as isize - 1) as usize, cy.clamp(0, GRID_ROWS as isize - 1) as usize)
     }
 
-    fn build(&mut self, features: &[Feature], width: f32, height: f32) {
+    pub(crate) fn build(&mut self, features: &[Feature], width: f32, height: f32) {
         self.inv_cell_w = GRID_COLS as f32 / width;
         self.inv_cell_h = GRID_ROWS as f32 / height;
         let mut count = [0u16; GRID_CELLS];
@@ -68,6 +69,23 @@ impl FeatureGrid {
             let c = cy * GRID_COLS + cx;
             self.items[usize::from(self.start[c] + fill[c])] = i as u16;
             fill[c] += 1;
+        }
+    }
+
+    /// Indices of the features in cells `x0..=x1` of row `cy`.
+    pub(crate) fn row_items(&self, cy: usize, x0: usize, x1: usize) -> &[u16] {
+        let row = cy * GRID_COLS;
+        &self.items[usize::from(self.start[row + x0])..usize::from(self.start[row + x1 + 1])]
+    }
+
+    /// Features whose cell lies in the box around (`x`, `y`) of half-size `r` (px).
+    pub(crate) fn for_each_near(&self, x: f32, y: f32, r: f32, mut f: impl FnMut(usize)) {
+        let (x0, y0) = self.cell_of(x - r, y - r);
+        let (x1, y1) = self.cell_of(x + r, y + r);
+        for cy in y0..=y1 {
+            for &i in self.row_items(cy, x0, x1) {
+                f(usize::from(i));
+            }
         }
     }
 }
@@ -108,12 +126,14 @@ impl ProjectionSearch {
         self.grid.build(feats, self.width, self.height);
     }
 
-    /// Matches window landmarks to `feats` by projection at `q.t_cw`. Overwrites `matches`
-    /// (weight 1 for every feature) and, with an EM gate, `cands`; returns the number of
-    /// matched features.
+    /// Matches the landmarks `ids` (the local map) to `feats` by projection at `q.t_cw`.
+    /// Overwrites `matches` (weight 1 for every feature) and, with an EM gate, `cands`;
+    /// returns the number of matched features.
+    #[allow(clippy::too_many_arguments)] // each slice is separate caller-owned storage
     pub fn search(
         &mut self,
-        window: &mut Window,
+        window: &mut Map,
+        ids: &[u32],
         cam: &StereoCamera,
         feats: &[Feature],
         q: &SearchQuery,
@@ -131,8 +151,7 @@ impl ProjectionSearch {
         let t_cw = q.t_cw;
         let center = t_cw.inverse().trans;
         let bf = cam.fx_px * cam.baseline_m;
-        let n_lm = window.landmarks().len();
-        for id in 0..n_lm as u32 {
+        for &id in ids {
             let l = *window.lm(id);
             if !l.alive {
                 continue;
@@ -163,10 +182,7 @@ impl ProjectionSearch {
             let mut best = (u32::MAX, usize::MAX, 0u8);
             let mut second = (u32::MAX, 0u8);
             for cy in y0..=y1 {
-                let row = cy * GRID_COLS;
-                let s = usize::from(self.grid.start[row + x0]);
-                let e = usize::from(self.grid.start[row + x1 + 1]);
-                for &fi in &self.grid.items[s..e] {
+                for &fi in self.grid.row_items(cy, x0, x1) {
                     let fi = usize::from(fi);
                     let f = &feats[fi];
                     let lvl = i32::from(f.level);

@@ -23,14 +23,14 @@ pub(crate) mod hard;
 
 pub use em::{class_log_likelihood, normalise, semantic_log_likelihood, EmParams};
 pub(crate) use em::{EmInput, EmScratch};
-pub(crate) use hard::{ProjectionSearch, SearchQuery};
+pub(crate) use hard::{FeatureGrid, ProjectionSearch, SearchQuery, LN_SCALE};
 
 use heapless::Vec;
 
 use crate::frame::{Feature, Frame, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
 use crate::image::ImageView;
-use crate::map::{measurement, renormalize, Window, NO_LANDMARK};
+use crate::map::{measurement, renormalize, Map, NO_LANDMARK};
 use crate::math;
 use crate::optim::{chi2, optimize_pose, PoseObs, PoseOptParams, PoseOptReport};
 use crate::seg::VOID;
@@ -141,6 +141,8 @@ impl Matches {
 /// The motion-only pose problem of one frame: weighted observations, the feature each came
 /// from and, after a solve, which are outliers.
 pub(crate) struct PoseProblem {
+    /// Stereo points beyond this depth (m) are monocular measurements.
+    pub far_m: f32,
     obs: Vec<PoseObs, MAX_PAIRS>,
     feat: [u16; MAX_PAIRS],
     outlier: [bool; MAX_PAIRS],
@@ -149,7 +151,12 @@ pub(crate) struct PoseProblem {
 impl PoseProblem {
     /// An empty problem.
     pub const fn new() -> Self {
-        Self { obs: Vec::new(), feat: [0; MAX_PAIRS], outlier: [false; MAX_PAIRS] }
+        Self {
+            far_m: f32::INFINITY,
+            obs: Vec::new(),
+            feat: [0; MAX_PAIRS],
+            outlier: [false; MAX_PAIRS],
+        }
     }
 
     /// Removes every observation.
@@ -171,7 +178,7 @@ impl PoseProblem {
     /// `em_weights`, the association weight; returns how many.
     pub fn collect(
         &mut self,
-        window: &Window,
+        window: &Map,
         feats: &[Feature],
         matches: &Matches,
         em_weights: bool,
@@ -183,7 +190,7 @@ impl PoseProblem {
                 continue;
             }
             let weight = if em_weights { f64::from(matches.weight[j]) } else { 1.0 };
-            let obs = PoseObs { p_w: window.lm(id).p_w, z: measurement(f), weight };
+            let obs = PoseObs { p_w: window.lm(id).p_w, z: measurement(f, self.far_m), weight };
             if !self.push(obs, j) {
                 break;
             }

@@ -1,35 +1,44 @@
-//! The map: the bounded window of keyframes and landmarks ([`Window`]) and its maintenance on
-//! a keyframe (landmark creation, local bundle adjustment, outlier observation removal and
-//! landmark culling, in `mapping`).
+//! The map: a persistent, bounded store of keyframes, landmarks with all their observations
+//! and the covisibility graph ([`Map`], in `store`); the local map a frame is tracked against
+//! ([`LocalSet`], in `local`); and its maintenance on a keyframe (`mapping`: stereo and
+//! triangulated landmarks, fusion, local bundle adjustment with fixed covisible neighbours,
+//! landmark and keyframe culling).
 //!
-//! This is ORB-SLAM2's `LocalMapping` in a bounded window: the tracker hands the map a frame,
-//! its pose and, per feature, the landmark it was matched to and the association weight
-//! (1 for nearest-neighbour association, the E-step weight under EM, paper §3.3); the map
-//! decides everything else. A covisibility graph and triangulation between keyframes belong
-//! here when they come.
+//! This is ORB-SLAM2's `Map` + `LocalMapping` in fixed memory, run inline: the tracker hands
+//! the map a frame, its pose and, per feature, the landmark it was matched to and the
+//! association weight (1 for nearest-neighbour association, the E-step weight under EM,
+//! paper §3.3); the map decides everything else.
 //!
-//! Memory: about 4.2 MiB, fixed at compile time: the window (2.6 MiB: 10 keyframes × 2048
-//! features and 8192 landmarks) plus the bundle-adjustment scratch (1.6 MiB: observations of
-//! every window keyframe, points and their backup); the tracker's memory test prints both.
+//! Memory: about 17 MiB, fixed at compile time: the store (≈13 MiB: 64 keyframes × 2048
+//! features, 16384 landmarks with up to 16 observations each) plus the bundle-adjustment
+//! scratch (observations of up to 24 keyframes, points and their backup) and the local
+//! landmark list; the tracker's memory test prints them.
 
+mod local;
 pub(crate) mod mapping;
-mod window;
+mod store;
 
+pub use local::{LocalSet, MAX_LOCAL_KEYFRAMES};
 pub(crate) use mapping::{LocalMap, MappingParams, NewKeyframe};
-pub use window::{KeyFrame, Landmark, Window, MAX_KEYFRAMES, MAX_LANDMARKS, NO_LANDMARK};
+pub use store::{
+    KeyFrame, Landmark, Map, MapCounters, Obs, MAX_KEYFRAMES, MAX_LANDMARKS, MAX_OBS, NO_KF,
+    NO_LANDMARK,
+};
 
 use crate::frame::{level_inv_sigma2, Feature};
 use crate::geom::Se3;
 use crate::optim::Measurement;
 
 /// The optimisation measurement of a feature: the same for the pose solve, EM, RANSAC and
-/// bundle adjustment.
+/// bundle adjustment. A stereo point farther than `far_m` is a monocular (bearing)
+/// measurement, as in ORB-SLAM3: its disparity is a pixel or two, so its depth says little,
+/// while its direction is what holds rotation.
 #[inline]
-pub(crate) fn measurement(f: &Feature) -> Measurement {
+pub(crate) fn measurement(f: &Feature, far_m: f32) -> Measurement {
     Measurement {
         u: f64::from(f.x),
         v: f64::from(f.y),
-        ur: if f.is_stereo() { f64::from(f.ur) } else { -1.0 },
+        ur: if f.is_stereo() && f.depth_m <= far_m { f64::from(f.ur) } else { -1.0 },
         inv_sigma2: level_inv_sigma2(f.level),
     }
 }

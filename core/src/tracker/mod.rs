@@ -26,7 +26,7 @@ use crate::assoc::{
 use crate::frame::{Feature, Frame, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
 use crate::map::{
-    measurement, renormalize, LocalMap, MappingParams, NewKeyframe, Window, NO_LANDMARK,
+    measurement, renormalize, LocalMap, LocalSet, Map, MappingParams, NewKeyframe, NO_LANDMARK,
 };
 use crate::optim::PoseOptParams;
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
@@ -51,6 +51,9 @@ pub struct TrackerParams {
     pub max_hamming: u32,
     /// Best/second-best ratio when both are on the same level (ORB-SLAM2 0.8).
     pub nn_ratio: f32,
+    /// Stereo points farther than this many baselines are monocular (bearing-only)
+    /// measurements in tracking and BA (infinite: every stereo point is a stereo measurement).
+    pub mono_beyond_baselines: f64,
     /// Fewer inliers than this and tracking is lost.
     pub min_inliers: u32,
     /// Keyframe when tracked landmarks fall below this share of the reference keyframe's.
@@ -59,6 +62,13 @@ pub struct TrackerParams {
     pub keyframe_max_interval: u32,
     /// BA iterations per keyframe.
     pub ba_iterations: u8,
+    /// Keyframes local BA optimises (the new one and its best covisible ones); the other
+    /// keyframes observing their landmarks are held fixed, up to the BA capacity.
+    pub ba_keyframes: usize,
+    /// Triangulate new landmarks between covisible keyframes.
+    pub triangulate: bool,
+    /// Remove redundant keyframes (≥ 90 % of their landmarks seen by ≥ 3 others).
+    pub cull_keyframes: bool,
     /// RANSAC hypotheses per frame (0 disables RANSAC).
     pub ransac_iterations: u32,
     /// Nearest-neighbour or EM association.
@@ -76,10 +86,14 @@ impl Default for TrackerParams {
             narrow_radius_px: 4.0,
             max_hamming: 100,
             nn_ratio: 0.8,
+            mono_beyond_baselines: 40.0,
             min_inliers: 20,
             keyframe_ratio: 0.75,
             keyframe_max_interval: 10,
             ba_iterations: 8,
+            ba_keyframes: 10,
+            triangulate: true,
+            cull_keyframes: true,
             ransac_iterations: 100,
             association: Association::Hard,
             em: EmParams::default(),
@@ -141,6 +155,16 @@ pub struct TrackerStats {
     pub lost: u32,
     /// Landmark creations refused because the store was full.
     pub landmark_overflow: u32,
+    /// Keyframes evicted (least recently used) because the store was full.
+    pub keyframe_evictions: u32,
+    /// Landmark observations dropped because a landmark's list was full.
+    pub observation_overflow: u32,
+    /// Keyframes removed as redundant by local mapping.
+    pub keyframes_culled: u32,
+    /// Landmarks created by triangulation between keyframes.
+    pub triangulated: u32,
+    /// Duplicate landmarks merged by fusion.
+    pub landmarks_fused: u32,
 }
 
 /// Why a tracker cannot be built.
@@ -176,6 +200,8 @@ pub struct Tracker {
     width: f32,
     height: f32,
     map: LocalMap,
+    local: LocalSet,
+    last_features: usize,
     state: TrackState,
     frame_index: u32,
     t_cw: Se3,
@@ -193,7 +219,7 @@ pub struct Tracker {
 
 /// Memory budget of one tracker (bytes), checked at compile time: the ECU target gives the
 /// whole localisation stack 32 MiB, of which the tracker may take 8.
-pub const TRACKER_BUDGET_BYTES: usize = 8 << 20;
+pub const TRACKER_BUDGET_BYTES: usize = 22 << 20;
 const _: () = assert!(core::mem::size_of::<Tracker>() <= TRACKER_BUDGET_BYTES);
 
 impl Tracker {
@@ -210,12 +236,16 @@ impl Tracker {
         if width == 0 || height == 0 || width > 65535 || height > 65535 {
             return Err(TrackerError::BadImageSize { width, height });
         }
+        let mut problem = PoseProblem::new();
+        problem.far_m = (params.mono_beyond_baselines * cam.baseline_m) as f32;
         Ok(Self {
             cam,
             params,
             width: width as f32,
             height: height as f32,
-            map: LocalMap::new(),
+            map: LocalMap::new(width as f32, height as f32),
+            local: LocalSet::new(),
+            last_features: 0,
             state: TrackState::Uninitialised,
             frame_index: 0,
             t_cw: Se3::identity(),
@@ -225,7 +255,7 @@ impl Tracker {
             stats: TrackerStats::default(),
             search: ProjectionSearch::new(width as f32, height as f32),
             matches: Matches::new(),
-            problem: PoseProblem::new(),
+            problem,
             corr: Vec::new(),
             em: EmScratch::new(),
         })
@@ -234,6 +264,7 @@ impl Tracker {
     /// Forgets the map and the motion; the next frame initialises again at the identity.
     pub fn reset(&mut self) {
         self.map.clear();
+        self.last_features = 0;
         self.state = TrackState::Uninitialised;
         self.frame_index = 0;
         self.t_cw = Se3::identity();
@@ -275,13 +306,18 @@ impl Tracker {
     /// Counters over the run.
     pub fn stats(&self) -> TrackerStats {
         let mut s = self.stats;
-        s.landmark_overflow = self.map.window().landmark_overflow;
+        let c = self.map.map().counters;
+        s.landmark_overflow = c.landmark_overflow;
+        s.keyframe_evictions = c.keyframe_evictions;
+        s.observation_overflow = c.observation_overflow;
+        s.keyframes_culled = c.keyframes_culled;
+        s.landmarks_fused = c.landmarks_fused;
         s
     }
 
-    /// The window (read-only), for inspection and plots.
-    pub fn window(&self) -> &Window {
-        self.map.window()
+    /// The map (read-only), for inspection and plots.
+    pub fn map(&self) -> &Map {
+        self.map.map()
     }
 
     /// Tracks one frame and returns its pose and counters.
@@ -331,8 +367,9 @@ impl Tracker {
         }
         rep.t_wc = self.t_cw.inverse();
         rep.state = self.state;
-        rep.landmarks = self.map.window().landmark_count() as u32;
-        rep.keyframes = self.map.window().len() as u32;
+        rep.landmarks = self.map.map().landmark_count() as u32;
+        rep.keyframes = self.map.map().len() as u32;
+        self.last_features = frame.features.len();
         rep
     }
 
@@ -356,6 +393,10 @@ impl Tracker {
         let feats = &frame.features[..];
         self.search.prepare(feats);
         self.t_cw = predicted;
+        // The local map around what the last frame matched (ORB-SLAM2 tracks the motion
+        // model against the last frame's points, which this covers).
+        let n_last = self.last_features.min(FRAME_CAPACITY);
+        self.local.update(self.map.map_mut(), &self.matches.lm[..n_last], self.frame_index);
         let mut matched = self.search_pass(feats, self.params.wide_radius_px, false);
         if matched < 30 {
             matched = self.search_pass(feats, self.params.wide_radius_px * 3.0, false);
@@ -384,14 +425,18 @@ impl Tracker {
         if first < 10 {
             return false;
         }
+        // TrackLocalMap: the local map around this frame's own matches, searched narrowly.
+        self.problem.drop_outliers(&mut self.matches);
+        self.local.update(self.map.map_mut(), &self.matches.lm[..feats.len()], self.frame_index);
         matched = self.search_pass(feats, self.params.narrow_radius_px, true);
         let inliers = if self.params.association == Association::Em {
             let input = EmInput {
                 frame,
-                window: self.map.window(),
+                window: self.map.map(),
                 cam: &self.cam,
                 params: &self.params.em,
                 null_max_hamming: self.params.max_hamming,
+                far_m: self.problem.far_m,
             };
             let em =
                 self.em.associate(&input, &mut self.t_cw, &mut self.problem, &mut self.matches);
@@ -405,7 +450,7 @@ impl Tracker {
         };
         rep.matched = matched;
         rep.inliers = inliers;
-        let window = self.map.window_mut();
+        let window = self.map.map_mut();
         for i in 0..feats.len() {
             let id = self.matches.lm[i];
             if id != NO_LANDMARK {
@@ -430,7 +475,8 @@ impl Tracker {
             em_gate: em.then_some(self.params.em.max_hamming),
         };
         self.search.search(
-            self.map.window_mut(),
+            self.map.map_mut(),
+            &self.local.lms,
             &self.cam,
             feats,
             &q,
@@ -452,7 +498,8 @@ impl Tracker {
             let p_c = f.is_stereo().then(|| {
                 self.cam.backproject(f64::from(f.x), f64::from(f.y), f64::from(f.depth_m))
             });
-            let c = Correspondence { p_w: self.map.window().lm(id).p_w, p_c, z: measurement(f) };
+            let z = measurement(f, self.problem.far_m);
+            let c = Correspondence { p_w: self.map.map().lm(id).p_w, p_c, z };
             let _ = self.corr.push(c);
         }
         let seed = u64::from(self.frame_index) ^ 0x5e31_0c00_0000_0001;
@@ -470,7 +517,7 @@ impl Tracker {
     /// count. With `classify`, matches are first split into inliers and outliers at the
     /// current pose (after RANSAC) instead of all starting as inliers.
     fn optimise(&mut self, feats: &[Feature], classify: bool) -> u32 {
-        self.problem.collect(self.map.window(), feats, &self.matches, false);
+        self.problem.collect(self.map.map(), feats, &self.matches, false);
         let params = PoseOptParams::default();
         self.problem.solve(&self.cam, &mut self.t_cw, classify, &params).inliers
     }
@@ -497,13 +544,18 @@ impl Tracker {
         (weak || need_close) && rep.inliers > 15
     }
 
-    /// Landmarks of the newest keyframe seen by at least `min_obs` window keyframes
-    /// (ORB-SLAM2's `TrackedMapPoints(nMinObs)`: 3, or 2 while the map has two keyframes or
-    /// fewer). A keyframe's freshly created points have one observation and do not count, or
-    /// every frame would look weak against the keyframe that made them.
+    /// Landmarks of the reference keyframe (the one sharing most landmarks with this frame)
+    /// seen by at least `min_obs` keyframes (ORB-SLAM2's `TrackedMapPoints(nMinObs)`: 3, or 2
+    /// while the map has two keyframes or fewer). A keyframe's freshly created points have
+    /// one observation and do not count, or every frame would look weak against the keyframe
+    /// that made them.
     fn reference_tracked(&self) -> u32 {
-        let window = self.map.window();
-        let Some(kf) = window.newest() else { return 0 };
+        let window = self.map.map();
+        let Some(slot) = self.local.reference.or(window.newest_slot()) else { return 0 };
+        let kf = window.kf(slot);
+        if !kf.alive {
+            return 0;
+        }
         let min_obs = if window.len() <= 2 { 2 } else { 3 };
         kf.landmark[..kf.features.len()]
             .iter()
@@ -521,6 +573,10 @@ impl Tracker {
             close_depth_baselines: self.params.close_depth_baselines,
             min_new_landmarks: self.params.min_new_landmarks,
             ba_iterations: self.params.ba_iterations,
+            ba_keyframes: self.params.ba_keyframes,
+            triangulate: self.params.triangulate,
+            cull_keyframes: self.params.cull_keyframes,
+            far_m: self.problem.far_m,
         };
         let kf = NewKeyframe {
             frame,
@@ -529,8 +585,9 @@ impl Tracker {
             landmark: &self.matches.lm,
             weight: &self.matches.weight,
         };
-        let out = self.map.insert_keyframe(&self.cam, &params, &kf);
-        rep.new_landmarks = out.new_landmarks;
+        let out = self.map.insert_keyframe(&self.cam, &params, &kf, self.frame_index);
+        rep.new_landmarks = out.new_landmarks + out.triangulated;
+        self.stats.triangulated += out.triangulated;
         rep.keyframe = true;
         self.stats.keyframes += 1;
         self.frames_since_kf = 0;

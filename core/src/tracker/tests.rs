@@ -205,9 +205,9 @@ fn tracker_memory_is_reported() {
     let mib = |b: usize| b as f64 / 1048576.0;
     use core::mem::size_of;
     std::println!(
-        "  map {:.2} MiB (window {:.2}), pose problem {:.2}, EM scratch {:.2}, search {:.3}",
+        "  map {:.2} MiB (store {:.2}), pose problem {:.2}, EM scratch {:.2}, search {:.3}",
         mib(size_of::<LocalMap>()),
-        mib(size_of::<Window>()),
+        mib(size_of::<Map>()),
         mib(size_of::<PoseProblem>()),
         mib(size_of::<EmScratch>()),
         mib(size_of::<ProjectionSearch>()),
