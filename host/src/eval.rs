@@ -1,4 +1,4 @@
-//! Trajectory evaluation: KITTI devkit t_rel/r_rel and Umeyama-aligned ATE.
+//! Trajectory evaluation: KITTI devkit t_rel/r_rel, Umeyama-aligned ATE and evo's RPE.
 //!
 //! # KITTI relative error (t_rel, r_rel)
 //! A re-implementation of `calcSequenceErrors` in the KITTI odometry devkit's
@@ -14,6 +14,16 @@
 //!
 //! The errors themselves are computed in `f64` (the devkit rounds them to `f32`), which changes
 //! results only far below the 3 significant digits that are reported.
+//!
+//! # RPE
+//! The relative pose error of `evo_rpe` without alignment (evo v1.38.1, `core/metrics.py` `RPE`):
+//! pairs `(i, j)` chosen on the **estimate** ([`rpe_pairs`]: every Δ frames, or each time the
+//! estimate has travelled Δ metres since the last chosen frame), the error
+//! `E = (Q_i⁻¹Q_j)⁻¹(P_i⁻¹P_j)` of the ground truth `Q` and estimate `P`, its translation
+//! `‖t(E)‖` (m) and the angle of `R(E)` (deg, [`rotation_angle`] as scipy gets it), plus the
+//! translation as a share of the ground-truth path between `i` and `j` (%). Relative errors
+//! need no alignment, and the pairs do not depend on the ground truth's scale. [`evaluate`]
+//! reports Δ = 1 frame and Δ = 10 m.
 //!
 //! # ATE
 //! Estimated positions are aligned to ground-truth positions with Umeyama's method
@@ -57,6 +67,9 @@ pub enum EvalError {
     /// (the same condition on which evo refuses to align).
     #[error("degenerate point set: Umeyama alignment needs positions spanning at least a plane")]
     DegenerateAlignment,
+    /// An RPE delta of 0 frames, or a negative or non-finite distance.
+    #[error("RPE delta must be at least 1 frame or a finite, non-negative distance")]
+    InvalidDelta,
 }
 
 /// How the estimate is aligned to the ground truth before the ATE.
@@ -376,16 +389,227 @@ pub fn ate(gt: &[Se3], est: &[Se3], align: Align) -> Result<Ate, EvalError> {
     let aligned_est: Vec<Se3> = est.iter().map(|p| alignment.apply_pose(p)).collect();
     let errors_m: Vec<f64> =
         aligned_est.iter().zip(gt).map(|(e, g)| (e.trans - g.trans).norm()).collect();
-    let n = errors_m.len() as f64;
-    let rmse_m = (errors_m.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-    let mean_m = errors_m.iter().sum::<f64>() / n;
-    let max_m = errors_m.iter().copied().fold(0.0, f64::max);
-    let mut sorted = errors_m.clone();
-    sorted.sort_by(f64::total_cmp);
-    let mid = sorted.len() / 2;
-    let median_m =
-        if sorted.len() % 2 == 1 { sorted[mid] } else { 0.5 * (sorted[mid - 1] + sorted[mid]) };
-    Ok(Ate { align, alignment, rmse_m, mean_m, median_m, max_m, errors_m, aligned_est })
+    let s = ErrorStats::of(&errors_m).ok_or(EvalError::Empty)?;
+    Ok(Ate {
+        align,
+        alignment,
+        rmse_m: s.rmse,
+        mean_m: s.mean,
+        median_m: s.median,
+        max_m: s.max,
+        errors_m,
+        aligned_est,
+    })
+}
+
+/// Summary statistics of a set of non-negative errors, as evo computes them (`numpy`'s
+/// `sqrt(mean(e²))`, `mean`, `median`, `max`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ErrorStats {
+    /// Root mean square.
+    pub rmse: f64,
+    /// Mean.
+    pub mean: f64,
+    /// Median (mean of the two middle values for an even count, like `numpy.median`).
+    pub median: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+impl ErrorStats {
+    /// The statistics of `errors`; `None` when there are none.
+    pub fn of(errors: &[f64]) -> Option<Self> {
+        if errors.is_empty() {
+            return None;
+        }
+        let n = errors.len() as f64;
+        let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+        let mean = errors.iter().sum::<f64>() / n;
+        let max = errors.iter().copied().fold(0.0, f64::max);
+        let mut sorted = errors.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let mid = sorted.len() / 2;
+        let median =
+            if sorted.len() % 2 == 1 { sorted[mid] } else { 0.5 * (sorted[mid - 1] + sorted[mid]) };
+        Some(ErrorStats { rmse, mean, median, max })
+    }
+}
+
+/// How far apart the two poses of an RPE pair are.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RpeDelta {
+    /// This many frames: pairs `(0, Δ), (Δ, 2Δ), …` (`evo_rpe --delta Δ --delta_unit f`).
+    Frames(usize),
+    /// This many metres travelled along the **estimate** (`evo_rpe --delta Δ --delta_unit m`,
+    /// whose pairs come from the estimate unless `--pairs_from_reference`).
+    Metres(f64),
+}
+
+/// The RPE over one frame that `semloc eval` reports.
+pub const RPE_1_FRAME: RpeDelta = RpeDelta::Frames(1);
+/// The RPE over 10 m that `semloc eval` reports.
+pub const RPE_10_M: RpeDelta = RpeDelta::Metres(10.0);
+
+impl fmt::Display for RpeDelta {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            RpeDelta::Frames(1) => f.write_str("1 frame"),
+            RpeDelta::Frames(n) => write!(f, "{n} frames"),
+            RpeDelta::Metres(m) => write!(f, "{m} m"),
+        }
+    }
+}
+
+/// The pairs `(i, j)` of evo's RPE with consecutive (not all) pairs, chosen on `est`:
+/// `filter_pairs_by_index` for frames; `filter_pairs_by_path` for metres, which walks the
+/// estimate, sums the steps since the last chosen frame and chooses frame `i` once that sum
+/// reaches `Δ` (the overshoot is dropped: the sum restarts at 0).
+///
+/// Fails with [`EvalError::InvalidDelta`] for 0 frames or a negative / non-finite distance.
+pub fn rpe_pairs(est: &[Se3], delta: RpeDelta) -> Result<Vec<(usize, usize)>, EvalError> {
+    let ids: Vec<usize> = match delta {
+        RpeDelta::Frames(0) => return Err(EvalError::InvalidDelta),
+        RpeDelta::Frames(d) => (0..est.len()).step_by(d).collect(),
+        RpeDelta::Metres(m) if !(m.is_finite() && m >= 0.0) => return Err(EvalError::InvalidDelta),
+        RpeDelta::Metres(m) => {
+            let mut ids = Vec::new();
+            if !est.is_empty() {
+                ids.push(0);
+            }
+            let mut path = 0.0;
+            for (i, w) in est.windows(2).enumerate() {
+                path += (w[1].trans - w[0].trans).norm();
+                if path >= m {
+                    ids.push(i + 1);
+                    path = 0.0;
+                }
+            }
+            ids
+        }
+    };
+    Ok(ids.windows(2).map(|w| (w[0], w[1])).collect())
+}
+
+/// The rotation angle (rad, in `[0, π]`) of `m` as evo's `so3_log_angle` gets it from scipy's
+/// `Rotation.from_matrix(m).as_rotvec()`: a matrix that is not orthogonal to numpy's
+/// `isclose(m mᵀ, I, atol=1e-12)` is replaced by its nearest rotation (`U Vᵀ` of its SVD),
+/// then Markley's quaternion, then `2 atan2(‖q_xyz‖, |q_w|)`.
+///
+/// The rounding of stored poses (KITTI files keep 7 digits) leaves their products non-orthogonal
+/// by ~1e-7, as large as a one-frame rotation error; `acos((tr R − 1) / 2)` on the raw matrix
+/// is then off by up to 20 % in the median on evo's KITTI 00 test pair.
+pub fn rotation_angle(m: &Matrix3<f64>) -> f64 {
+    let gram = m * m.transpose();
+    // numpy.isclose(a, b) is |a − b| <= atol + rtol·|b| with the default rtol 1e-5.
+    let orthogonal = (0..3).all(|r| {
+        (0..3).all(|c| {
+            let want = if r == c { 1.0 } else { 0.0 };
+            (gram[(r, c)] - want).abs() <= 1e-12 + 1e-5 * want
+        })
+    });
+    let r = if orthogonal {
+        *m
+    } else {
+        let svd = m.svd(true, true);
+        match (svd.u, svd.v_t) {
+            (Some(u), Some(v_t)) => u * v_t,
+            _ => *m,
+        }
+    };
+    let tr = r[(0, 0)] + r[(1, 1)] + r[(2, 2)];
+    let decision = [r[(0, 0)], r[(1, 1)], r[(2, 2)], tr];
+    // numpy.argmax: the first of equal maxima.
+    let choice = (1..4).fold(0, |best, k| if decision[k] > decision[best] { k } else { best });
+    let q = match choice {
+        0 => [
+            1.0 - tr + 2.0 * r[(0, 0)],
+            r[(1, 0)] + r[(0, 1)],
+            r[(2, 0)] + r[(0, 2)],
+            r[(2, 1)] - r[(1, 2)],
+        ],
+        1 => [
+            r[(1, 0)] + r[(0, 1)],
+            1.0 - tr + 2.0 * r[(1, 1)],
+            r[(2, 1)] + r[(1, 2)],
+            r[(0, 2)] - r[(2, 0)],
+        ],
+        2 => [
+            r[(2, 0)] + r[(0, 2)],
+            r[(2, 1)] + r[(1, 2)],
+            1.0 - tr + 2.0 * r[(2, 2)],
+            r[(1, 0)] - r[(0, 1)],
+        ],
+        _ => [r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)], 1.0 + tr],
+    };
+    // The common scale of the quaternion cancels in atan2, so it needs no normalisation.
+    let xyz = Vector3::new(q[0], q[1], q[2]).norm();
+    2.0 * xyz.atan2(q[3].abs())
+}
+
+/// Relative pose error over one [`RpeDelta`], as `evo_rpe` without alignment computes it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Rpe {
+    /// The distance between the two poses of a pair.
+    pub delta: RpeDelta,
+    /// Number of pairs.
+    pub n_pairs: usize,
+    /// Translation error `‖t(E)‖` (m), evo's `trans_part`.
+    pub trans_m: ErrorStats,
+    /// Translation error as a share of the ground-truth path between the two poses (%), over
+    /// the pairs whose ground-truth path is not zero; `None` when none is (a standing vehicle).
+    pub trans_pct: Option<ErrorStats>,
+    /// Rotation error: the angle of `R(E)` (deg), evo's `angle_deg`.
+    pub rot_deg: ErrorStats,
+    /// The pairs `(i, j)`.
+    #[serde(skip)]
+    pub pairs: Vec<(usize, usize)>,
+    /// Translation error per pair (m).
+    #[serde(skip)]
+    pub trans_errors_m: Vec<f64>,
+    /// Rotation error per pair (deg).
+    #[serde(skip)]
+    pub rot_errors_deg: Vec<f64>,
+}
+
+/// The RPE of `est` against `gt` over `delta`: for every pair `(i, j)` of [`rpe_pairs`] the
+/// error `E = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j)` (`Q` ground truth, `P` estimate, rigid inverses as
+/// evo's `se3_inverse`), its translation `‖t(E)‖` and its [`rotation_angle`].
+///
+/// `Ok(None)` when the trajectory has no pair (shorter than `delta`); the usual
+/// [`EvalError::LengthMismatch`] / [`EvalError::Empty`] and [`EvalError::InvalidDelta`].
+pub fn rpe(gt: &[Se3], est: &[Se3], delta: RpeDelta) -> Result<Option<Rpe>, EvalError> {
+    check_lengths(gt, est)?;
+    let pairs = rpe_pairs(est, delta)?;
+    let dist = trajectory_distances(gt);
+    let (mut trans_errors_m, mut rot_errors_deg, mut pct) = (Vec::new(), Vec::new(), Vec::new());
+    for &(i, j) in &pairs {
+        let q = gt[i].inverse().compose(&gt[j]);
+        let p = est[i].inverse().compose(&est[j]);
+        let e = q.inverse().compose(&p);
+        let t = e.trans.norm();
+        let path_m = dist[j] - dist[i];
+        if path_m > 0.0 {
+            pct.push(100.0 * t / path_m);
+        }
+        trans_errors_m.push(t);
+        rot_errors_deg.push(rotation_angle(&e.rot).to_degrees());
+    }
+    let (Some(trans_m), Some(rot_deg)) =
+        (ErrorStats::of(&trans_errors_m), ErrorStats::of(&rot_errors_deg))
+    else {
+        return Ok(None);
+    };
+    Ok(Some(Rpe {
+        delta,
+        n_pairs: pairs.len(),
+        trans_m,
+        trans_pct: ErrorStats::of(&pct),
+        rot_deg,
+        pairs,
+        trans_errors_m,
+        rot_errors_deg,
+    }))
 }
 
 /// Everything `semloc eval` reports about one estimated trajectory.
@@ -421,6 +645,10 @@ pub struct EvalReport {
     pub per_length: Vec<LengthStats>,
     /// Every devkit segment.
     pub segments: Vec<SegmentError>,
+    /// RPE over one frame; `None` for a single pose.
+    pub rpe_1f: Option<Rpe>,
+    /// RPE over 10 m of the estimate's path; `None` when the estimate travels less than 10 m.
+    pub rpe_10m: Option<Rpe>,
     /// Cumulative ground-truth distance at every frame (m), for plots.
     #[serde(skip)]
     pub gt_distances_m: Vec<f64>,
@@ -432,11 +660,13 @@ pub struct EvalReport {
     pub aligned_est: Vec<Se3>,
 }
 
-/// Evaluates `est` against `gt` (same length, frame for frame): devkit t_rel/r_rel and the ATE
-/// after `align`.
+/// Evaluates `est` against `gt` (same length, frame for frame): devkit t_rel/r_rel, the ATE
+/// after `align` and the RPE over [`RPE_1_FRAME`] and [`RPE_10_M`] (never aligned).
 pub fn evaluate(gt: &[Se3], est: &[Se3], align: Align) -> Result<EvalReport, EvalError> {
     let segments = segment_errors(gt, est)?;
     let a = ate(gt, est, align)?;
+    let rpe_1f = rpe(gt, est, RPE_1_FRAME)?;
+    let rpe_10m = rpe(gt, est, RPE_10_M)?;
     let gt_distances_m = trajectory_distances(gt);
     let means = kitti_means(&segments);
     Ok(EvalReport {
@@ -453,6 +683,8 @@ pub fn evaluate(gt: &[Se3], est: &[Se3], align: Align) -> Result<EvalReport, Eva
         alignment: a.alignment,
         per_length: per_length(&segments),
         segments,
+        rpe_1f,
+        rpe_10m,
         gt_distances_m,
         ate_errors_m: a.errors_m,
         aligned_est: a.aligned_est,
@@ -494,6 +726,14 @@ impl fmt::Display for EvalReport {
         if self.align == Align::Sim3 {
             writeln!(f, "scale          {:.4}", self.alignment.scale)?;
         }
+        writeln!(f)?;
+        writeln!(
+            f,
+            "RPE (as evo_rpe: no alignment, pairs on the estimate)\n\
+             delta     error             pairs       rmse       mean     median        max"
+        )?;
+        write_rpe_rows(f, RPE_1_FRAME, self.rpe_1f.as_ref())?;
+        write_rpe_rows(f, RPE_10_M, self.rpe_10m.as_ref())?;
         if !self.per_length.is_empty() {
             writeln!(f)?;
             writeln!(f, "length [m]  segments  t_rel [%]  r_rel [deg/100 m]")?;
@@ -507,6 +747,38 @@ impl fmt::Display for EvalReport {
         }
         Ok(())
     }
+}
+
+/// The three rows of one RPE delta in [`EvalReport`]'s text, or one line saying why there is
+/// none.
+fn write_rpe_rows(f: &mut fmt::Formatter<'_>, delta: RpeDelta, rpe: Option<&Rpe>) -> fmt::Result {
+    let Some(r) = rpe else {
+        let why = match delta {
+            RpeDelta::Frames(_) => "fewer poses than that",
+            RpeDelta::Metres(_) => "the estimate travels less than that",
+        };
+        return writeln!(f, "{:<10}none ({why})", delta.to_string());
+    };
+    let rows = [
+        ("translation [m]", Some(r.trans_m)),
+        ("translation [%]", r.trans_pct),
+        ("rotation [deg]", Some(r.rot_deg)),
+    ];
+    for (k, (what, stats)) in rows.into_iter().enumerate() {
+        let (head, pairs) =
+            if k == 0 { (delta.to_string(), r.n_pairs.to_string()) } else { Default::default() };
+        match stats {
+            Some(s) => writeln!(
+                f,
+                "{head:<10}{what:<16}{pairs:>7}{:>11.4}{:>11.4}{:>11.4}{:>11.4}",
+                s.rmse, s.mean, s.median, s.max
+            )?,
+            None => {
+                writeln!(f, "{head:<10}{what:<16}{pairs:>7}  n/a (ground truth does not move)")?
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -621,6 +893,102 @@ mod tests {
         assert!(r.to_string().contains("n/a"));
         let one = evaluate(&gt[..1], &gt[..1], Align::None).unwrap();
         assert_eq!(one.ate_rmse_m, 0.0);
+    }
+
+    /// A ground truth with a pure scale bias `s` against a perfect estimate: every pair's error
+    /// is `(1 − s)·t` of the estimate's step `t`, over a ground-truth path of `s·|path|`, so the
+    /// RPE translation reads `100·(1 − 1/s)` % (the estimate's scale error against that ground
+    /// truth, exactly for one frame, where the path is the chord) and the rotation reads 0.
+    #[test]
+    fn rpe_of_a_scale_biased_ground_truth_is_the_bias() {
+        let est = drive(600);
+        let s = 1.03;
+        let gt: Vec<Se3> = est.iter().map(|p| Se3::new(p.rot, p.trans * s)).collect();
+        let bias_pct = 100.0 * (1.0 - 1.0 / s);
+        let r = evaluate(&gt, &est, Align::Se3).unwrap();
+        let one = r.rpe_1f.as_ref().unwrap();
+        assert_eq!((one.n_pairs, one.delta), (599, RpeDelta::Frames(1)));
+        let pct = one.trans_pct.unwrap();
+        for x in [pct.rmse, pct.mean, pct.median, pct.max] {
+            assert!((x - bias_pct).abs() < 1e-9, "{pct:?} vs {bias_pct}");
+        }
+        assert!(one.rot_deg.max < 1e-9, "{:?}", one.rot_deg);
+        assert!((one.trans_m.mean - 0.03 * 1.0).abs() < 1e-3, "{:?}", one.trans_m);
+        // Pairs over 10 m follow the estimate's path (so the biased ground truth does not move
+        // them): 10 frames of ~1 m; on this wide arc the chord is the path to 2e-7.
+        let ten = r.rpe_10m.as_ref().unwrap();
+        assert!(ten.pairs.iter().all(|&(i, j)| j - i == 10 || j - i == 11), "{:?}", ten.pairs);
+        let pct = ten.trans_pct.unwrap();
+        assert!((pct.max - bias_pct).abs() < 1e-5 && (pct.median - bias_pct).abs() < 1e-5);
+        assert!(ten.rot_deg.max < 1e-9);
+        // Scaling the estimate the other way round gives exactly the bias.
+        let longer: Vec<Se3> = est.iter().map(|p| Se3::new(p.rot, p.trans * 1.02)).collect();
+        let r = rpe(&est, &longer, RPE_1_FRAME).unwrap().unwrap();
+        assert!((r.trans_pct.unwrap().mean - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn short_trajectories_have_no_10m_rpe() {
+        // About 1 m per frame: 5 poses travel about 4 m.
+        let gt = drive(5);
+        let r = evaluate(&gt, &gt, Align::None).unwrap();
+        assert_eq!(r.rpe_1f.as_ref().map(|r| r.n_pairs), Some(4));
+        assert_eq!(r.rpe_10m, None);
+        let text = r.to_string();
+        assert!(text.contains("10 m      none (the estimate travels less than that)"), "{text}");
+        let json = serde_json::to_value(&r).unwrap();
+        assert!(json["rpe_10m"].is_null());
+        assert_eq!(json["rpe_1f"]["n_pairs"], 4);
+        assert_eq!(json["rpe_1f"]["delta"]["frames"], 1);
+        // One pose: no pair at all, and still no NaN anywhere.
+        let one = evaluate(&gt[..1], &gt[..1], Align::None).unwrap();
+        assert_eq!((one.rpe_1f.as_ref(), one.rpe_10m.as_ref()), (None, None));
+        assert!(!one.to_string().contains("NaN"));
+        // A standing vehicle: translation % has no path to divide by.
+        let still = vec![Se3::identity(); 4];
+        let r = rpe(&still, &still, RPE_1_FRAME).unwrap().unwrap();
+        assert_eq!((r.n_pairs, r.trans_pct, r.trans_m.max), (3, None, 0.0));
+        assert_eq!(rpe(&still, &still, RpeDelta::Frames(0)), Err(EvalError::InvalidDelta));
+        assert_eq!(rpe(&still, &still, RpeDelta::Metres(-1.0)), Err(EvalError::InvalidDelta));
+        assert_eq!(rpe(&still, &still, RpeDelta::Metres(f64::NAN)), Err(EvalError::InvalidDelta));
+    }
+
+    #[test]
+    fn rpe_pairs_follow_evo_filters() {
+        let at = |xs: &[f64]| -> Vec<Se3> {
+            xs.iter().map(|&x| Se3::new(Matrix3::identity(), Vector3::new(x, 0.0, 0.0))).collect()
+        };
+        // filter_pairs_by_index: (0, Δ), (Δ, 2Δ), … while both exist.
+        let eight = at(&[0.0; 8]);
+        assert_eq!(rpe_pairs(&eight, RpeDelta::Frames(3)).unwrap(), [(0, 3), (3, 6)]);
+        assert_eq!(rpe_pairs(&eight, RpeDelta::Frames(8)).unwrap(), []);
+        // filter_pairs_by_path: steps 4, 4, 3 | 10 | 1, 9.5 — each sum >= 10 ends a pair and the
+        // overshoot is dropped.
+        let path = at(&[0.0, 4.0, 8.0, 11.0, 21.0, 22.0, 31.5, 32.0]);
+        assert_eq!(rpe_pairs(&path, RPE_10_M).unwrap(), [(0, 3), (3, 4), (4, 6)]);
+        assert_eq!(rpe_pairs(&path, RpeDelta::Metres(0.0)).unwrap().len(), 7);
+        assert_eq!(rpe_pairs(&[], RPE_10_M).unwrap(), []);
+    }
+
+    #[test]
+    fn rotation_angle_is_that_of_the_nearest_rotation() {
+        for angle in [0.0, 1e-6, 1e-4, 0.3, 2.0, 3.1, core::f64::consts::PI] {
+            let axis = nalgebra::Unit::new_normalize(Vector3::new(0.3, -1.0, 0.2));
+            let r = Rotation3::from_axis_angle(&axis, angle).into_inner();
+            assert!((rotation_angle(&r) - angle).abs() < 1e-12, "{angle}");
+            // A rotation times a symmetric positive-definite matrix has that rotation as its
+            // nearest one: rounding a pose file's entries to 7 digits is such an error.
+            let sym = Matrix3::new(1.0, 3e-8, -2e-8, 3e-8, 1.0 - 4e-8, 5e-8, -2e-8, 5e-8, 1.0);
+            let got = rotation_angle(&(r * sym));
+            assert!((got - angle).abs() < 1e-12, "{angle}: {got}");
+        }
+        // acos of the trace on the raw matrix is far off for a small angle.
+        let axis = Vector3::z_axis();
+        let r = Rotation3::from_axis_angle(&axis, 1e-4).into_inner();
+        let sym = Matrix3::<f64>::new(1.0 + 1e-7, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        let naive = (0.5 * ((r * sym).trace() - 1.0)).clamp(-1.0, 1.0).acos();
+        assert!((naive - 1e-4).abs() > 1e-5, "{naive}");
+        assert!((rotation_angle(&(r * sym)) - 1e-4).abs() < 1e-12);
     }
 
     #[test]

@@ -260,12 +260,15 @@ fn ablate_runs_every_combination_into_one_table() {
     assert!(stdout.contains("Fig. 4"), "{stdout}");
     let table = std::fs::read_to_string(out.join("ablation.txt")).unwrap();
     assert!(table.lines().count() > 6, "{table}");
+    assert!(table.contains("RPE 1f (rmse)") && table.contains("[m / deg]"), "{table}");
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
     let rows = v["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 4);
     for r in rows {
         assert!(r["ate_rmse_m"].as_f64().is_some_and(|a| a.is_finite()), "{r}");
+        assert!(r["rpe_1f_trans_rmse_m"].as_f64().is_some_and(|a| a.is_finite()), "{r}");
+        assert!(r["rpe_1f_rot_rmse_deg"].as_f64().is_some_and(|a| a.is_finite()), "{r}");
         let dir = out.join(r["folder"].as_str().unwrap());
         assert!(dir.join("trajectory.txt").is_file(), "{}", dir.display());
     }

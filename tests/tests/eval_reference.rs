@@ -3,7 +3,7 @@
 //! Real-data tests skip when `shared/data` is absent (see `semloc_tests::shared_data`).
 
 use nalgebra::{Rotation3, Vector3};
-use semloc::eval::{evaluate, Align};
+use semloc::eval::{evaluate, rpe, Align, ErrorStats, Rpe, RpeDelta, RPE_10_M, RPE_1_FRAME};
 use semloc::traj::read_kitti;
 use semloc_core::geom::Se3;
 
@@ -94,6 +94,67 @@ fn evo_test_data_matches_evo_ape_cli() {
     close("none rmse", evaluate(&gt, &est, Align::None).unwrap().ate_rmse_m, 7.790289).unwrap();
 }
 
+/// `(rmse, mean, median, max)` of evo's RPE on its own test data (`KITTI_00_gt.txt` as reference,
+/// `KITTI_00_ORB.txt` as estimate), evo v1.38.1 (numpy 2.4.6, scipy 1.17.1), from the
+/// `stats.json` that `--save_results` writes (full precision; the printed table has 6 digits):
+/// `evo_rpe kitti KITTI_00_gt.txt KITTI_00_ORB.txt --delta 1 --delta_unit f --pose_relation
+/// trans_part --save_results r.zip` (and `--pose_relation angle_deg`; and `--delta 10
+/// --delta_unit m` for both). 4540 pairs over one frame, 354 over 10 m (sse / rmse²).
+const EVO_RPE_1F_TRANS_M: [f64; 4] =
+    [0.028120377017393856, 0.019301310981393958, 0.01470904343858892, 0.30271249059536337];
+const EVO_RPE_1F_ROT_DEG: [f64; 4] =
+    [0.11497352125979227, 0.059583454923114204, 0.04107440527534105, 2.196615406942412];
+const EVO_RPE_10M_TRANS_M: [f64; 4] =
+    [0.23676346946465107, 0.17230091749993448, 0.13848794835907108, 1.3313924766703351];
+const EVO_RPE_10M_ROT_DEG: [f64; 4] =
+    [0.6542737378449711, 0.23609006787320685, 0.0904365525603543, 6.20158418781979];
+/// Translation % (not an evo relation: `‖t(E)‖` over the ground-truth path between the pair's
+/// poses), computed with numpy from the pairs (`metrics.id_pairs_from_delta` on the estimate)
+/// and `E` (`metrics.RPE.rpe_base`) of the same evo version.
+const EVO_RPE_1F_TRANS_PCT: [f64; 4] =
+    [8.18715101992741, 3.1715112810944, 1.77355763853703, 210.849825501867];
+const EVO_RPE_10M_TRANS_PCT: [f64; 4] =
+    [2.26081882013845, 1.64230645914754, 1.32437326912724, 12.3310978506826];
+
+/// Relative tolerance against evo's RPE: the same arithmetic in the same precision.
+const RPE_REL_TOL: f64 = 1e-6;
+
+fn stats_match(what: &str, got: Option<ErrorStats>, want: [f64; 4]) -> Vec<String> {
+    let Some(s) = got else { return vec![format!("{what}: none")] };
+    let names = ["rmse", "mean", "median", "max"];
+    [s.rmse, s.mean, s.median, s.max]
+        .into_iter()
+        .zip(want)
+        .zip(names)
+        .filter(|&((g, w), _)| (g - w).abs() > RPE_REL_TOL * w.abs())
+        .map(|((g, w), n)| format!("{what} {n}: got {g:.15}, evo {w:.15}"))
+        .collect()
+}
+
+#[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
+fn evo_test_data_matches_evo_rpe_cli() {
+    let Some(data) = semloc_tests::shared_data() else { return };
+    let dir = data.join("trajectories/evo-test");
+    let gt = read_kitti(dir.join("KITTI_00_gt.txt")).unwrap();
+    let est = read_kitti(dir.join("KITTI_00_ORB.txt")).unwrap();
+    let report = evaluate(&gt, &est, Align::Se3).unwrap();
+    let check = |r: Option<&Rpe>, delta: RpeDelta, n: usize, t: [f64; 4], p: [f64; 4], a| {
+        let r = r.unwrap();
+        assert_eq!((r.delta, r.n_pairs), (delta, n));
+        let mut bad = stats_match("trans m", Some(r.trans_m), t);
+        bad.extend(stats_match("trans %", r.trans_pct, p));
+        bad.extend(stats_match("rot deg", Some(r.rot_deg), a));
+        assert!(bad.is_empty(), "{delta}:\n{}", bad.join("\n"));
+    };
+    let (t, p, a) = (EVO_RPE_1F_TRANS_M, EVO_RPE_1F_TRANS_PCT, EVO_RPE_1F_ROT_DEG);
+    check(report.rpe_1f.as_ref(), RPE_1_FRAME, 4540, t, p, a);
+    let (t, p, a) = (EVO_RPE_10M_TRANS_M, EVO_RPE_10M_TRANS_PCT, EVO_RPE_10M_ROT_DEG);
+    check(report.rpe_10m.as_ref(), RPE_10_M, 354, t, p, a);
+    // The same through the function itself.
+    assert_eq!(rpe(&gt, &est, RPE_10_M).unwrap().as_ref(), report.rpe_10m.as_ref());
+}
+
 /// A synthetic drive on a wide arc (radius 5 km), 1.2 m per frame, no real data needed.
 fn synthetic_drive(n: usize) -> Vec<Se3> {
     (0..n)
@@ -119,6 +180,10 @@ fn synthetic_known_errors() {
     for row in &r.per_length {
         assert!((row.t_rel_pct - 1.0).abs() < 0.015, "{row:?}");
     }
+    // Over one frame the path is the chord: RPE translation is exactly 1 %, rotation 0.
+    let one = r.rpe_1f.as_ref().unwrap();
+    assert!((one.trans_pct.unwrap().max - 1.0).abs() < 1e-9, "{one:?}");
+    assert!(one.rot_deg.max < 1e-9);
     // Sim(3) recovers the scale: no ATE left.
     let s = evaluate(&gt, &est, Align::Sim3).unwrap();
     assert!((s.alignment.scale * 1.01 - 1.0).abs() < 1e-12);
@@ -153,6 +218,9 @@ fn synthetic_known_errors() {
     let d = evaluate(&gt, &drift, Align::Se3).unwrap();
     let rr = d.r_rel_deg_per_100m.unwrap();
     assert!((rr - 1.0).abs() < 0.01, "r_rel {rr}");
+    // Each frame adds 1.2 m / 100 m × 1 deg of heading error, which the one-frame RPE sees whole.
+    let rot = d.rpe_1f.as_ref().unwrap().rot_deg;
+    assert!((rot.median - 0.012).abs() < 1e-9 && (rot.max - 0.012).abs() < 1e-9, "{rot:?}");
 }
 
 /// Plots of sequence 00 are written (to `$SEMLOC_PLOT_DIR` when set, to look at them).

@@ -1,6 +1,7 @@
 //! `semloc ablate`: the paper's ablation on one dataset — every combination of semantics
 //! (`off`, `cull`, `full`) and association (`hard`, `em`) tracked in one invocation, one table
-//! (ATE, t_rel, r_rel, ms/frame, features culled, associations EM changed), plus the share of
+//! (ATE, t_rel, r_rel, RPE over one frame, ms/frame, features culled, associations EM changed),
+//! plus the share of
 //! features on static structure with plain and with semantic ORB (the paper's Fig. 4).
 
 use core::fmt::Write as _;
@@ -69,6 +70,10 @@ struct JsonRow<'a> {
     t_rel_pct: Option<f64>,
     r_rel_deg_per_100m: Option<f64>,
     path_length_m: Option<f64>,
+    rpe_1f_trans_rmse_m: Option<f64>,
+    rpe_1f_rot_rmse_deg: Option<f64>,
+    rpe_10m_trans_rmse_pct: Option<f64>,
+    rpe_10m_rot_rmse_deg: Option<f64>,
     compute_median_ms: Option<f64>,
     compute_p99_ms: Option<f64>,
     lost: u32,
@@ -94,13 +99,14 @@ pub fn table(rows: &[Row]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9}{:>11}",
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}",
         "semantics",
         "assoc",
         "ATE [m]",
         "ATE %",
         "t_rel [%]",
         "r_rel [°/",
+        "RPE 1f (rmse)",
         "ms/frame",
         "p99 ms",
         "lost",
@@ -109,8 +115,8 @@ pub fn table(rows: &[Row]) -> String {
     );
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9}{:>11}",
-        "", "", "", "of len", "", "100 m]", "median", "", "", "/frame", "total"
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}",
+        "", "", "", "of len", "", "100 m]", "[m / deg]", "median", "", "", "/frame", "total"
     );
     for r in rows {
         let e = r.outcome.eval.as_ref();
@@ -118,13 +124,17 @@ pub fn table(rows: &[Row]) -> String {
         let compute = r.outcome.summary.timing.get("compute");
         let _ = writeln!(
             s,
-            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>10}{:>9}{:>6}{:>9.0}{:>11}",
+            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9.0}{:>11}",
             r.semantics.name(),
             association_name(r.assoc),
             f(e.map(|e| e.ate_rmse_m), 3),
             f(e.map(|e| 100.0 * e.ate_rmse_m / e.path_length_m.max(1e-9)), 2),
             f(e.and_then(|e| e.t_rel_pct), 3),
             f(e.and_then(|e| e.r_rel_deg_per_100m), 3),
+            e.and_then(|e| e.rpe_1f.as_ref()).map_or("n/a".to_owned(), |r| format!(
+                "{:.3} / {:.3}",
+                r.trans_m.rmse, r.rot_deg.rmse
+            )),
             f(compute.map(|p| p.median_ms), 1),
             f(compute.map(|p| p.p99_ms), 1),
             r.outcome.summary.lost,
@@ -273,6 +283,13 @@ pub fn run(args: &AblateArgs) -> Result<()> {
                 t_rel_pct: e.and_then(|e| e.t_rel_pct),
                 r_rel_deg_per_100m: e.and_then(|e| e.r_rel_deg_per_100m),
                 path_length_m: e.map(|e| e.path_length_m),
+                rpe_1f_trans_rmse_m: e.and_then(|e| e.rpe_1f.as_ref()).map(|r| r.trans_m.rmse),
+                rpe_1f_rot_rmse_deg: e.and_then(|e| e.rpe_1f.as_ref()).map(|r| r.rot_deg.rmse),
+                rpe_10m_trans_rmse_pct: e
+                    .and_then(|e| e.rpe_10m.as_ref())
+                    .and_then(|r| r.trans_pct)
+                    .map(|s| s.rmse),
+                rpe_10m_rot_rmse_deg: e.and_then(|e| e.rpe_10m.as_ref()).map(|r| r.rot_deg.rmse),
                 compute_median_ms: c.map(|p| p.median_ms),
                 compute_p99_ms: c.map(|p| p.p99_ms),
                 lost: r.outcome.summary.lost,

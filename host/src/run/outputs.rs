@@ -54,6 +54,10 @@ pub struct EvalSummary {
     pub t_rel_pct: Option<f64>,
     pub r_rel_deg_per_100m: Option<f64>,
     pub path_length_m: f64,
+    pub rpe_1f_trans_rmse_m: Option<f64>,
+    pub rpe_1f_rot_rmse_deg: Option<f64>,
+    pub rpe_10m_trans_rmse_pct: Option<f64>,
+    pub rpe_10m_rot_rmse_deg: Option<f64>,
 }
 
 impl From<&EvalReport> for EvalSummary {
@@ -64,6 +68,10 @@ impl From<&EvalReport> for EvalSummary {
             t_rel_pct: e.t_rel_pct,
             r_rel_deg_per_100m: e.r_rel_deg_per_100m,
             path_length_m: e.path_length_m,
+            rpe_1f_trans_rmse_m: e.rpe_1f.as_ref().map(|r| r.trans_m.rmse),
+            rpe_1f_rot_rmse_deg: e.rpe_1f.as_ref().map(|r| r.rot_deg.rmse),
+            rpe_10m_trans_rmse_pct: e.rpe_10m.as_ref().and_then(|r| r.trans_pct).map(|s| s.rmse),
+            rpe_10m_rot_rmse_deg: e.rpe_10m.as_ref().map(|r| r.rot_deg.rmse),
         }
     }
 }
