@@ -312,8 +312,8 @@ fn candidate_log_likelihood(
 fn null_log_likelihood(input: &EmInput<'_>, j: usize) -> f64 {
     let f = &input.frame.features[j];
     let em = input.params;
-    let mut ll =
-        -0.5 * measurement(f, input.far_m).chi2_threshold() - f64::from(input.null_max_hamming) / em.tau_orb;
+    let mut ll = -0.5 * measurement(f, input.far_m).chi2_threshold()
+        - f64::from(input.null_max_hamming) / em.tau_orb;
     if f.class != VOID {
         ll += math::ln(1.0 / NUM_CLASSES as f64);
         if input.frame.sem[j].is_some() {

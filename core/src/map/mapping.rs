@@ -638,7 +638,12 @@ impl LocalMap {
             let kf = self.map.kf(slot_of[p]);
             let f = &kf.features[feat];
             let weight = f64::from(kf.weight[feat]);
-            let _ = self.ba_obs.push(BaObs { kf: p as u8, point, z: measurement(f, params.far_m), weight });
+            let _ = self.ba_obs.push(BaObs {
+                kf: p as u8,
+                point,
+                z: measurement(f, params.far_m),
+                weight,
+            });
         }
         let ba_params = BaParams { iterations: params.ba_iterations, robust: true };
         let report = bundle_adjust(

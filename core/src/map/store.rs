@@ -334,8 +334,7 @@ impl Map {
             let mut best: Option<(u16, u32, u8)> = None;
             for &s in self.live.iter() {
                 let w = self.covis[usize::from(slot)][usize::from(s)];
-                if s == slot || w < min_weight.max(1) || self.kfs[usize::from(s)].stamp == stamp
-                {
+                if s == slot || w < min_weight.max(1) || self.kfs[usize::from(s)].stamp == stamp {
                     continue;
                 }
                 let id = self.kfs[usize::from(s)].id;
@@ -453,9 +452,7 @@ impl Map {
     /// observation list drops its oldest keyframe's observation (counted).
     pub fn add_observation(&mut self, slot: u8, feat: usize, id: u32) {
         let s = usize::from(slot);
-        if !self.kfs[s].alive
-            || feat >= self.kfs[s].features.len()
-            || !self.lms[id as usize].alive
+        if !self.kfs[s].alive || feat >= self.kfs[s].features.len() || !self.lms[id as usize].alive
         {
             return;
         }

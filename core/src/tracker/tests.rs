@@ -213,3 +213,38 @@ fn tracker_memory_is_reported() {
         mib(size_of::<ProjectionSearch>()),
     );
 }
+
+#[test]
+fn a_standing_camera_culls_redundant_keyframes() {
+    run_on_big_stack(|| {
+        let mut rng = Rng::new(0xdead_beef_cafe_f00d);
+        let pts = world(&mut rng);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        // Standing still, a keyframe comes every `keyframe_max_interval` frames and each sees
+        // what the others see: ORB-SLAM2's culling keeps the map from filling with copies.
+        for _ in 0..80 {
+            let rep = tracker.process(&render(&pts, &truth(0), &mut rng));
+            assert!(!rep.lost);
+            assert!(rep.t_wc.trans.norm() < 0.01);
+        }
+        let s = tracker.stats();
+        assert!(s.keyframes >= 8, "{} keyframes made", s.keyframes);
+        assert!(s.keyframes_culled >= 4, "{} keyframes culled", s.keyframes_culled);
+        assert_eq!(tracker.map().len() as u32, s.keyframes - s.keyframes_culled);
+    });
+}
+
+#[test]
+fn far_points_are_mapped_by_triangulation_within_capacity() {
+    run_on_big_stack(|| {
+        let mut rng = Rng::new(0xdead_beef_cafe_f00d);
+        let pts = world(&mut rng);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        for k in 0..40 {
+            assert!(!tracker.process(&render(&pts, &truth(k), &mut rng)).lost);
+        }
+        let s = tracker.stats();
+        assert!(s.triangulated > 100, "{} landmarks triangulated", s.triangulated);
+        assert_eq!(s.landmark_overflow + s.keyframe_evictions + s.observation_overflow, 0);
+    });
+}

@@ -12,8 +12,8 @@
 //! ```
 //!
 //! Memory map (`qemu_virt.ld`): code, constants (the embedded frames) and data from
-//! `0x4008_0000`, then `.bss` (the ≈ 10 MiB `Localiser` and the network's ≈ 2.5 MiB
-//! buffers, zeroed by `_start`), then a 64 MiB
+//! `0x4008_0000`, then `.bss` (the ≈ 22 MiB `Localiser` and the network's ≈ 2.5 MiB
+//! buffers, zeroed by `_start`), then a 160 MiB
 //! stack that `_start` paints so the peak use can be reported. Lines starting with `@` are
 //! this target's own (timings from the generic timer, stack peak); the rest is the same text
 //! the host prints.
