@@ -589,51 +589,77 @@ fn build_reduced(
     scratch.s.fill(0.0);
     scratch.g.fill(0.0);
     let free = |kf: u8| usize::from(kf).checked_sub(fixed);
+    // Per point: the free poses observing it and their H_lp blocks (one observation per pose
+    // and point), so the Schur correction touches only those pose pairs. Each observation is
+    // linearised once.
+    let mut idx = [0usize; MAX_WINDOW];
+    let mut hpl = [Matrix3x6::<f64>::zeros(); MAX_WINDOW];
     for (p, start, end) in groups(obs) {
         let group = &obs[start..end];
         let p_w = points[p as usize];
-        let block = point_block(cam, poses, &p_w, group, params, lambda);
-        // Pose-pose terms and, for a movable point, the Schur correction.
-        let mut hpl = [Matrix3x6::<f64>::zeros(); MAX_WINDOW]; // stores H_lp (3x6) per pose
-        let mut seen = [false; MAX_WINDOW];
+        let mut hll = Matrix3::<f64>::zeros();
+        let mut bl = Vector3::<f64>::zeros();
+        let mut n_seen = 0usize;
         for o in group {
-            let Some(a) = free(o.kf) else { continue };
             let Some((jp, jl, r, w)) = obs_terms(cam, &poses[usize::from(o.kf)], &p_w, o, params)
             else {
                 continue;
             };
-            let hpp = jp.transpose() * jp * w;
-            let gp = jp.transpose() * r * w;
-            add_block(&mut scratch.s, a, a, &hpp);
+            let jlt_w = jl.transpose() * w;
+            hll += jlt_w * jl;
+            bl += jlt_w * r;
+            let Some(a) = free(o.kf) else { continue };
+            let jpt_w = jp.transpose() * w;
+            add_block(&mut scratch.s, a, a, &(jpt_w * jp));
+            let gp = jpt_w * r;
             for i in 0..6 {
                 scratch.g[6 * a + i] += gp[i];
             }
-            hpl[a] += jl.transpose() * jp * w;
-            seen[a] = true;
-        }
-        let Some((hll_inv, bl)) = block else { continue };
-        // S -= H_pl H_ll⁻¹ H_lp ; g -= H_pl H_ll⁻¹ b_l
-        for a in 0..nfree {
-            if !seen[a] {
-                continue;
+            let h = jlt_w * jp;
+            match idx[..n_seen].iter().position(|&x| x == a) {
+                Some(k) => hpl[k] += h,
+                None if n_seen < MAX_WINDOW => {
+                    idx[n_seen] = a;
+                    hpl[n_seen] = h;
+                    n_seen += 1;
+                }
+                None => {}
             }
-            let ha = hpl[a].transpose() * hll_inv; // 6x3
+        }
+        for i in 0..3 {
+            hll[(i, i)] += lambda * hll[(i, i)].max(1e-6);
+        }
+        // A block that is numerically singular (a point seen once, monocular) stays fixed.
+        let Some(hll_inv) = hll.try_inverse() else { continue };
+        if !(hll.determinant() > 1e-18) || !hll_inv.iter().all(|x| x.is_finite()) {
+            continue;
+        }
+        // S -= H_pl H_ll⁻¹ H_lp ; g -= H_pl H_ll⁻¹ b_l
+        for ka in 0..n_seen {
+            let a = idx[ka];
+            let ha = hpl[ka].transpose() * hll_inv; // 6x3
             let ga = ha * bl;
             for i in 0..6 {
                 scratch.g[6 * a + i] -= ga[i];
             }
-            for b in 0..nfree {
-                if !seen[b] {
-                    continue;
-                }
-                let m = -(ha * hpl[b]);
-                add_block(&mut scratch.s, a, b, &m);
+            for kb in 0..n_seen {
+                sub_block(&mut scratch.s, a, idx[kb], &(ha * hpl[kb]));
             }
         }
     }
     for i in 0..6 * nfree {
         let d = scratch.s[(i, i)];
         scratch.s[(i, i)] = d + lambda * d.max(1e-6);
+    }
+}
+
+/// `S[a, b] -= m` for one 6×6 block (plain loops: nalgebra's negation iterates slowly).
+#[inline]
+fn sub_block(s: &mut SMatrix<f64, NP, NP>, a: usize, b: usize, m: &SMatrix<f64, 6, 6>) {
+    for c in 0..6 {
+        for r in 0..6 {
+            s[(6 * a + r, 6 * b + c)] -= m[(r, c)];
+        }
     }
 }
 

@@ -152,7 +152,8 @@ impl ProjectionSearch {
         let center = t_cw.inverse().trans;
         let bf = cam.fx_px * cam.baseline_m;
         for &id in ids {
-            let l = *window.lm(id);
+            // Only what the search reads: a landmark is ~250 bytes with its observation list.
+            let l = LmView::of(window.lm(id));
             if !l.alive {
                 continue;
             }
@@ -220,5 +221,27 @@ impl ProjectionSearch {
             }
         }
         matches.count(feats.len())
+    }
+}
+
+/// The fields of a landmark the projection search reads.
+struct LmView {
+    p_w: nalgebra::Vector3<f64>,
+    desc: crate::frame::Descriptor,
+    ref_level: u8,
+    ref_dist_m: f32,
+    alive: bool,
+}
+
+impl LmView {
+    #[inline]
+    fn of(l: &crate::map::Landmark) -> Self {
+        Self {
+            p_w: l.p_w,
+            desc: l.desc,
+            ref_level: l.ref_level,
+            ref_dist_m: l.ref_dist_m,
+            alive: l.alive,
+        }
     }
 }

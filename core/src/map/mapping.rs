@@ -30,7 +30,7 @@ const MAX_BA_OBS: usize = MAX_WINDOW * FRAME_CAPACITY;
 /// Descriptor distance accepted for triangulation and fusion (ORB-SLAM2 `TH_LOW`).
 const TH_LOW: u32 = 50;
 /// Covisible keyframes searched for triangulation (ORB-SLAM2 stereo: 10).
-const TRIANGULATION_NEIGHBOURS: usize = 10;
+const TRIANGULATION_NEIGHBOURS: usize = 6;
 /// Second-order neighbours per neighbour in fusion (ORB-SLAM2: 5).
 const FUSION_SECOND_NEIGHBOURS: usize = 5;
 /// ORB-SLAM2's scale consistency factor (1.5 × scale factor).
@@ -471,7 +471,8 @@ impl LocalMap {
     /// ORB-SLAM2's `Fuse` of one landmark into keyframe `t` (its features gridded in
     /// `self.grid`). Returns 1 when it merged or added an observation.
     fn fuse_one(&mut self, cam: &StereoCamera, t: u8, id: u32) -> u32 {
-        let l = *self.map.lm(id);
+        let l = self.map.lm(id);
+        let l_obs = l.n_obs;
         if !l.alive || l.feature_in(t).is_some() {
             return 0;
         }
@@ -485,7 +486,7 @@ impl LocalMap {
             return 0;
         }
         let dist = pc.norm();
-        let pred = predict_level(&l, dist);
+        let pred = predict_level(l, dist);
         let r = 3.0 * level_scale(pred as u8);
         let ur = u - cam.bf() / pc.z;
         let mut best = (u32::MAX, usize::MAX);
@@ -525,7 +526,7 @@ impl LocalMap {
             return 0;
         }
         // The better observed landmark stays.
-        if self.map.lm(other).n_obs >= l.n_obs {
+        if self.map.lm(other).n_obs >= l_obs {
             self.map.merge_landmark(id, other);
         } else {
             self.map.merge_landmark(other, id);

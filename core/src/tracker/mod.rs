@@ -90,7 +90,7 @@ impl Default for TrackerParams {
             min_inliers: 20,
             keyframe_ratio: 0.75,
             keyframe_max_interval: 10,
-            ba_iterations: 8,
+            ba_iterations: 5,
             ba_keyframes: 15,
             triangulate: true,
             cull_keyframes: true,
