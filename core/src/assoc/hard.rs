@@ -15,8 +15,7 @@
 use super::{Candidate, Candidates, Matches};
 use crate::frame::{hamming, level_scale, Feature, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
-use crate::map::{Map, NO_LANDMARK};
-use crate::math;
+use crate::map::{predict_level, Map, NO_LANDMARK};
 
 /// Grid used to look up features near a projected landmark.
 const GRID_COLS: usize = 64;
@@ -167,12 +166,7 @@ impl ProjectionSearch {
                 continue;
             }
             let dist = (l.p_w - center).norm();
-            let pred = if l.ref_dist_m > 0.0 && dist > 1e-6 {
-                let d = math::ln(f64::from(l.ref_dist_m) / dist) / LN_SCALE;
-                (i32::from(l.ref_level) + math::roundf(d as f32) as i32).clamp(0, 7)
-            } else {
-                i32::from(l.ref_level)
-            };
+            let pred = predict_level(l.ref_level, l.ref_dist_m, dist);
             if q.count_visible {
                 window.lm_mut(id).visible += 1;
             }

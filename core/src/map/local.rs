@@ -47,21 +47,8 @@ impl LocalSet {
             }
         }
         let stamp = map.next_stamp();
-        // K1 by count, most first (ties: newer first), by repeated maximum: few keyframes.
-        loop {
-            let mut best: Option<(u32, u32, u8)> = None;
-            for &s in map.keyframe_slots() {
-                let c = count[usize::from(s)];
-                if c == 0 || map.kf(s).stamp == stamp {
-                    continue;
-                }
-                let id = map.kf(s).id;
-                if best.is_none_or(|(bc, bid, _)| (c, id) > (bc, bid)) {
-                    best = Some((c, id, s));
-                }
-            }
-            let Some((_, _, s)) = best else { break };
-            map.kf_mut(s).stamp = stamp;
+        // K1 by count, most first (ties: newer first).
+        while let Some(s) = map.take_best(stamp, |s| count[usize::from(s)]) {
             if self.kfs.push(s).is_err() {
                 break;
             }

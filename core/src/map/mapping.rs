@@ -16,7 +16,8 @@ use heapless::Vec;
 use nalgebra::Vector3;
 
 use super::{
-    measurement, renormalize, Landmark, Map, MAX_KEYFRAMES, MAX_LANDMARKS, NO_KF, NO_LANDMARK,
+    measurement, predict_level, renormalize, Landmark, Map, MAX_KEYFRAMES, MAX_LANDMARKS, NO_KF,
+    NO_LANDMARK,
 };
 use crate::assoc::FeatureGrid;
 use crate::frame::{hamming, level_inv_sigma2, level_scale, Feature, Frame, FRAME_CAPACITY};
@@ -486,7 +487,7 @@ impl LocalMap {
             return 0;
         }
         let dist = pc.norm();
-        let pred = predict_level(l, dist);
+        let pred = predict_level(l.ref_level, l.ref_dist_m, dist);
         let r = 3.0 * level_scale(pred as u8);
         let ur = u - cam.bf() / pc.z;
         let mut best = (u32::MAX, usize::MAX);
@@ -563,19 +564,7 @@ impl LocalMap {
         // Fixed keyframes: observers outside the local set, most observations first.
         let mut fixed: Vec<u8, MAX_WINDOW> = Vec::new();
         while local.len() + fixed.len() < MAX_WINDOW {
-            let mut best: Option<(u32, u32, u8)> = None;
-            for &s in self.map.keyframe_slots() {
-                let c = obs_count[usize::from(s)];
-                if c == 0 || self.map.kf(s).stamp == stamp {
-                    continue;
-                }
-                let id = self.map.kf(s).id;
-                if best.is_none_or(|(bc, bid, _)| (c, id) > (bc, bid)) {
-                    best = Some((c, id, s));
-                }
-            }
-            let Some((_, _, s)) = best else { break };
-            self.map.kf_mut(s).stamp = stamp;
+            let Some(s) = self.map.take_best(stamp, |s| obs_count[usize::from(s)]) else { break };
             let _ = fixed.push(s);
         }
         // No fixed keyframe (a young map): the oldest local keyframe anchors the gauge.
@@ -749,16 +738,6 @@ impl LocalMap {
 #[inline]
 fn proj(cam: &StereoCamera, p: &Vector3<f64>) -> (f64, f64) {
     (cam.fx_px * p.x / p.z + cam.cx_px, cam.fy_px * p.y / p.z + cam.cy_px)
-}
-
-/// The pyramid level a landmark is predicted to appear on at distance `dist` (m).
-fn predict_level(l: &Landmark, dist: f64) -> i32 {
-    if l.ref_dist_m > 0.0 && dist > 1e-6 {
-        let d = crate::math::ln(f64::from(l.ref_dist_m) / dist) / crate::assoc::LN_SCALE;
-        (i32::from(l.ref_level) + crate::math::roundf(d as f32) as i32).clamp(0, 7)
-    } else {
-        i32::from(l.ref_level)
-    }
 }
 
 /// Triangulates features `f1` (camera `t1`) and `f2` (camera `t2`) as ORB-SLAM2's

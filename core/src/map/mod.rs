@@ -43,6 +43,18 @@ pub(crate) fn measurement(f: &Feature, far_m: f32) -> Measurement {
     }
 }
 
+/// The pyramid level a landmark last observed on `ref_level` at `ref_dist_m` is predicted to
+/// appear on at distance `dist` (m): the projection search and fusion both use it.
+#[inline]
+pub(crate) fn predict_level(ref_level: u8, ref_dist_m: f32, dist: f64) -> i32 {
+    if ref_dist_m > 0.0 && dist > 1e-6 {
+        let d = crate::math::ln(f64::from(ref_dist_m) / dist) / crate::assoc::LN_SCALE;
+        (i32::from(ref_level) + crate::math::roundf(d as f32) as i32).clamp(0, 7)
+    } else {
+        i32::from(ref_level)
+    }
+}
+
 /// `t` with its rotation block projected back onto SO(3) (unchanged if that fails, which
 /// only a corrupted pose can make happen).
 #[inline]

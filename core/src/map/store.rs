@@ -329,25 +329,42 @@ impl Map {
         out: &mut Vec<u8, N>,
     ) -> usize {
         let mut added = 0;
-        // Selection by repeated maximum: n and the keyframe count are small.
+        let row = self.covis[usize::from(slot)];
+        let min = u32::from(min_weight.max(1));
         while added < n && !out.is_full() {
-            let mut best: Option<(u16, u32, u8)> = None;
-            for &s in self.live.iter() {
-                let w = self.covis[usize::from(slot)][usize::from(s)];
-                if s == slot || w < min_weight.max(1) || self.kfs[usize::from(s)].stamp == stamp {
-                    continue;
+            let score = |s: u8| {
+                let w = u32::from(row[usize::from(s)]);
+                if s == slot || w < min {
+                    0
+                } else {
+                    w
                 }
-                let id = self.kfs[usize::from(s)].id;
-                if best.is_none_or(|(bw, bid, _)| (w, id) > (bw, bid)) {
-                    best = Some((w, id, s));
-                }
-            }
-            let Some((_, _, s)) = best else { break };
-            self.kfs[usize::from(s)].stamp = stamp;
+            };
+            let Some(s) = self.take_best(stamp, score) else { break };
             let _ = out.push(s);
             added += 1;
         }
         added
+    }
+
+    /// The live keyframe not yet stamped `stamp` with the highest positive `score` (ties:
+    /// newer first), stamped; `None` when every score is 0. Repeated calls list keyframes best
+    /// first: a selection by repeated maximum, cheap at this map's keyframe count.
+    pub fn take_best(&mut self, stamp: u32, score: impl Fn(u8) -> u32) -> Option<u8> {
+        let mut best: Option<(u32, u32, u8)> = None;
+        for &s in self.live.iter() {
+            let c = score(s);
+            let k = &self.kfs[usize::from(s)];
+            if c == 0 || k.stamp == stamp {
+                continue;
+            }
+            if best.is_none_or(|(bc, bid, _)| (c, k.id) > (bc, bid)) {
+                best = Some((c, k.id, s));
+            }
+        }
+        let (_, _, s) = best?;
+        self.kfs[usize::from(s)].stamp = stamp;
+        Some(s)
     }
 
     /// Appends a keyframe made of `features` at `t_cw`; when every slot is taken the least
