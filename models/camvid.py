@@ -43,6 +43,26 @@ def list_split(root, split):
     return [(os.path.join(img_dir, n), os.path.join(ann_dir, n[:-4] + ".png")) for n in names]
 
 
+def sequence_of(path):
+    """CamVid sequence of an image path: the file-name prefix before '_' (0001TP, 0006R0,
+    0016E5, Seq05VD)."""
+    return os.path.basename(path).split("_", 1)[0]
+
+
+def list_sequences(root, splits, include=None, exclude=None):
+    """Items of `splits` whose sequence is in `include` (all when None) and not in `exclude`."""
+    items = []
+    for sp in splits:
+        for it in list_split(root, sp):
+            seq = sequence_of(it[0])
+            if include is not None and seq not in include:
+                continue
+            if exclude is not None and seq in exclude:
+                continue
+            items.append(it)
+    return items
+
+
 def load_luma(path):
     """u8 luma, H x W (Pillow BT.601 fixed point, as the Rust side)."""
     return np.asarray(Image.open(path).convert("L"), dtype=np.uint8)
@@ -76,9 +96,10 @@ class CamVid(torch.utils.data.Dataset):
     """
 
     def __init__(self, split, root=DEFAULT_ROOT, crop=(384, 384), augment=None, limit=None,
-                 scale=(0.5, 2.0), seed=0, cache=True):
+                 scale=(0.5, 2.0), seed=0, cache=True, items=None, strong=False):
         self.split = split
-        self.items = list_split(root, split)
+        self.items = list_split(root, split) if items is None else list(items)
+        self.strong = strong
         if limit:
             self.items = self.items[:limit]
         self.crop = crop
@@ -140,13 +161,34 @@ class CamVid(torch.utils.data.Dataset):
         f = np.clip(f, 0.0, 1.0)
         g = math.exp(rng.uniform(math.log(0.7), math.log(1.4)))
         f = f ** g
-        if rng.random() < 0.5:
-            sigma = rng.uniform(0.0, 0.03)
+        if self.strong:
+            # KITTI-like appearance: a stronger exposure range, defocus / motion blur and
+            # sensor noise, so the net does not learn CamVid's one camera.
+            f = np.clip(f * rng.uniform(0.6, 1.5), 0.0, 1.0)
+            if rng.random() < 0.4:
+                f = _blur(f, rng)
+        if rng.random() < (0.7 if self.strong else 0.5):
+            sigma = rng.uniform(0.0, 0.05 if self.strong else 0.03)
             nrng = np.random.default_rng(rng.randrange(1 << 31))
             f = f + nrng.normal(0.0, sigma, f.shape)
         # back to u8 levels, as the engine only ever sees u8 luma
         img = np.clip(np.round(f * 255.0), 0, 255)
         return img, lab
+
+
+def _blur(f, rng):
+    """Separable box blur of radius 1-2 along x (motion) or both axes (defocus)."""
+    r = rng.choice([1, 1, 2])
+    k = 2 * r + 1
+    g = np.pad(f, r, mode="edge")
+    c = np.cumsum(np.cumsum(g, 0), 1)
+    c = np.pad(c, ((1, 0), (1, 0)))
+    if rng.random() < 0.5:  # defocus: k x k box
+        out = (c[k:, k:] - c[:-k, k:] - c[k:, :-k] + c[:-k, :-k]) / (k * k)
+    else:  # horizontal motion: 1 x k
+        row = np.pad(np.cumsum(g[r:-r], 1), ((0, 0), (1, 0)))
+        out = (row[:, k:] - row[:, :-k]) / k
+    return out
 
 
 def confusion(pred, target, n=len(CLASSES)):
@@ -178,7 +220,14 @@ def metrics(cm):
     ccm = category_confusion(cm)
     ciou = iou_from_confusion(ccm)
     acc = (cm.diag().sum() / cm.sum().clamp(min=1)).item()
+    # The dynamic mask culling uses (car, pedestrian, bicyclist): pixel precision and recall.
+    d = torch.tensor(DYNAMIC)
+    tp = cm[d][:, d].sum().item()
+    pred_dyn = cm[:, d].sum().item()
+    gt_dyn = cm[d].sum().item()
     return {
+        "dyn_precision": tp / pred_dyn if pred_dyn else float("nan"),
+        "dyn_recall": tp / gt_dyn if gt_dyn else float("nan"),
         "miou": float(np.nanmean(iou.numpy())),
         "iou": {c: float(v) for c, v in zip(CLASSES, iou.tolist())},
         "cat_miou": float(np.nanmean(ciou.numpy())),

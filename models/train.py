@@ -56,6 +56,11 @@ def get_args(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--amp", action="store_true", help="bf16 autocast on CUDA")
     p.add_argument("--data", default=camvid.DEFAULT_ROOT)
+    p.add_argument("--holdout-seq", default="",
+                   help="CamVid sequence kept out of training entirely (e.g. 0006R0): train on "
+                   "train+val without it, select on it, report val beside it")
+    p.add_argument("--aug", choices=["basic", "strong"], default="basic",
+                   help="strong: wider exposure range, blur, more noise (KITTI-like appearance)")
     p.add_argument("--resume", default="", help="checkpoint to start from: weights, and when it holds "
                    "them (every last.pt does) the optimiser state, epoch and iteration, so the "
                    "schedule continues where an interrupted run stopped")
@@ -97,9 +102,19 @@ def main(argv=None):
     wd = a.wd if a.wd is not None else (4e-5 if a.optim == "sgd" else 1e-2)
     os.makedirs(a.out, exist_ok=True)
 
+    train_items = None
+    if a.holdout_seq:
+        train_items = camvid.list_sequences(a.data, ["train", "val"], exclude={a.holdout_seq})
+        sel_items = camvid.list_sequences(a.data, ["train", "val"], include={a.holdout_seq})
+        if not sel_items:
+            raise SystemExit(f"--holdout-seq {a.holdout_seq}: no such sequence in {a.data}")
     train_ds = camvid.CamVid("train", a.data, crop=a.crop, limit=a.limit_images or None,
-                             scale=tuple(a.scale), seed=a.seed)
-    val_ds = camvid.CamVid("val", a.data, limit=a.limit_val or None)
+                             scale=tuple(a.scale), seed=a.seed, items=train_items,
+                             strong=a.aug == "strong")
+    # Selection set: the held-out sequence when there is one, else CamVid val.
+    val_ds = camvid.CamVid("val", a.data, limit=a.limit_val or None,
+                           items=sel_items if a.holdout_seq else None)
+    seen_val_ds = camvid.CamVid("val", a.data) if a.holdout_seq else None
     g = torch.Generator()
     g.manual_seed(a.seed)
     train_dl = torch.utils.data.DataLoader(
@@ -107,6 +122,8 @@ def main(argv=None):
         num_workers=a.workers, generator=g, persistent_workers=a.workers > 0,
         pin_memory=device.type == "cuda")
     val_dl = torch.utils.data.DataLoader(val_ds, batch_size=4, num_workers=a.workers)
+    seen_val_dl = (torch.utils.data.DataLoader(seen_val_ds, batch_size=4, num_workers=a.workers)
+                   if seen_val_ds is not None else None)
 
     model = build(a.variant).to(device)
     resume = torch.load(a.resume, map_location="cpu") if a.resume else None
@@ -188,9 +205,15 @@ def main(argv=None):
             cm = evaluate(model, val_dl, device, a.amp)
             m = camvid.metrics(cm)
             m.update(epoch=epoch + 1, iter=it, loss=run_loss / max(1, n_b), elapsed_s=time.time() - t_start)
+            if seen_val_dl is not None:
+                mv = camvid.metrics(evaluate(model, seen_val_dl, device, a.amp))
+                m.update(val_seen_miou=mv["miou"], val_seen_cat_miou=mv["cat_miou"])
             history.append(m)
-            print(f"  val mIoU {m['miou'] * 100:.2f}  category mIoU {m['cat_miou'] * 100:.2f}  "
-                  f"pixel acc {m['pixel_acc'] * 100:.2f}", flush=True)
+            name = f"held-out {a.holdout_seq}" if a.holdout_seq else "val"
+            print(f"  {name} mIoU {m['miou'] * 100:.2f}  category mIoU {m['cat_miou'] * 100:.2f}  "
+                  f"pixel acc {m['pixel_acc'] * 100:.2f}"
+                  + (f"  (val, seen in training: {m['val_seen_miou'] * 100:.2f})"
+                     if seen_val_dl is not None else ""), flush=True)
             if m["miou"] > best["miou"]:
                 best = m
                 ckpt = {"model": model.state_dict(), "variant": a.variant, "epoch": epoch + 1,

@@ -97,6 +97,7 @@ pub mod image;
 pub mod localiser;
 pub mod map;
 pub mod math;
+pub mod motion;
 pub mod nn;
 pub mod optim;
 pub mod orb;

@@ -261,8 +261,9 @@ impl Localiser {
                 got: (width, height),
             });
         }
-        let tracker = Tracker::new(camera, config.width, config.height, config.tracker)
+        let mut tracker = Tracker::new(camera, config.width, config.height, config.tracker)
             .map_err(LocaliserError::Tracker)?;
+        tracker.set_motion_aware(config.semantics == Some(WeightScheme::Motion));
         // One value built in its final place as far as the compiler allows (the extractors,
         // matcher and frame have `const fn new`); configured afterwards, so no multi-MiB
         // temporaries are moved around.
@@ -351,6 +352,7 @@ impl Localiser {
     /// As [`Self::set_labels`] (not expected: the labels were checked when set).
     pub fn set_semantics(&mut self, scheme: Option<WeightScheme>) -> Result<(), LocaliserError> {
         self.config.semantics = scheme;
+        self.tracker.set_motion_aware(scheme == Some(WeightScheme::Motion));
         if self.sem.labelled {
             self.sem.build_weights(scheme, (self.width, self.height))?;
         }

@@ -92,6 +92,10 @@ pub enum WeightScheme {
     Cull,
     /// The paper's semantic ORB: cull dynamic, ×3 construction/object, ×1 others.
     Full,
+    /// Motion-aware semantics (beyond the paper, [`crate::motion`]): ×3 construction/object,
+    /// ×1 others *including* dynamic classes, whose features the tracker then keeps where their
+    /// object is tested static and removes where it moves.
+    Motion,
 }
 
 /// Weight of a class under `scheme`, as a weight-image value.
@@ -105,6 +109,13 @@ pub const fn weight(class: u8, scheme: WeightScheme) -> u8 {
             }
         }
         WeightScheme::Full => orb_weight(class),
+        WeightScheme::Motion => {
+            if is_dynamic(class) {
+                85
+            } else {
+                orb_weight(class)
+            }
+        }
     }
 }
 
@@ -156,6 +167,9 @@ mod tests {
         assert_eq!(orb_weight(6), 3 * orb_weight(5));
         assert_eq!(weight(1, WeightScheme::Cull), weight(3, WeightScheme::Cull));
         assert_eq!(weight(8, WeightScheme::Cull), 0);
+        // Motion-aware: dynamic classes are extracted (×1); the tracker decides.
+        assert_eq!(weight(8, WeightScheme::Motion), weight(3, WeightScheme::Motion));
+        assert_eq!(weight(1, WeightScheme::Motion), orb_weight(1));
     }
 
     #[test]

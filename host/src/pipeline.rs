@@ -43,6 +43,12 @@ pub trait FrameSource: Sync {
     fn labels(&self, i: usize) -> Result<Cow<'_, GrayImage>, PipelineError>;
     /// Frame `i`'s timestamp in seconds.
     fn timestamp_s(&self, i: usize) -> f64;
+    /// Frame `i`'s ground-truth mask of moving objects (non-zero where something moves), when
+    /// the source has one (`semloc synth`'s `dynamic/` folder); `None` otherwise or when it
+    /// cannot be read (it only feeds the motion test's precision/recall, never tracking).
+    fn moving_mask(&self, _i: usize) -> Option<GrayImage> {
+        None
+    }
 }
 
 impl FrameSource for Sequence {
@@ -60,6 +66,11 @@ impl FrameSource for Sequence {
     }
     fn timestamp_s(&self, i: usize) -> f64 {
         self.times_s.get(i).copied().unwrap_or(i as f64 * 0.1)
+    }
+    fn moving_mask(&self, i: usize) -> Option<GrayImage> {
+        let name = self.left.get(i)?.file_name()?;
+        let img = image::open(self.root.join("dynamic").join(name)).ok()?.into_luma8();
+        (img.dimensions() == self.image_size).then_some(img)
     }
 }
 

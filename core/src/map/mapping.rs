@@ -68,6 +68,9 @@ pub(crate) struct NewKeyframe<'a> {
     pub landmark: &'a [u32; FRAME_CAPACITY],
     /// Association weight of each matched feature.
     pub weight: &'a [f32; FRAME_CAPACITY],
+    /// Features that may not create landmarks (on moving objects, [`crate::motion`]); `None`:
+    /// all may.
+    pub blocked: Option<&'a [bool; FRAME_CAPACITY]>,
 }
 
 /// What inserting a keyframe did.
@@ -106,6 +109,8 @@ pub(crate) struct LocalMap {
     ba_backup: [Vector3<f64>; MAX_LANDMARKS],
     ba_ids: [u32; MAX_LANDMARKS],
     lm_compact: [u32; MAX_LANDMARKS],
+    /// The current keyframe's features that may not create landmarks.
+    blocked: [bool; FRAME_CAPACITY],
 }
 
 impl LocalMap {
@@ -127,6 +132,7 @@ impl LocalMap {
             ba_backup: [Vector3::new(0.0, 0.0, 0.0); MAX_LANDMARKS],
             ba_ids: [0; MAX_LANDMARKS],
             lm_compact: [u32::MAX; MAX_LANDMARKS],
+            blocked: [false; FRAME_CAPACITY],
         };
         m.map.clear();
         m
@@ -168,6 +174,10 @@ impl LocalMap {
             return out;
         };
         out.stored = true;
+        match kf.blocked {
+            Some(b) => self.blocked[..feats.len()].copy_from_slice(&b[..feats.len()]),
+            None => self.blocked[..feats.len()].fill(false),
+        }
         let center = kf.t_cw.inverse().trans;
         for (i, f) in feats.iter().enumerate() {
             let id = kf.landmark[i];
@@ -220,7 +230,7 @@ impl LocalMap {
         let t_wc = self.map.kf(slot).t_cw.inverse();
         self.order_keys.clear();
         for (i, f) in feats.iter().enumerate() {
-            if f.is_stereo() && self.map.kf(slot).landmark[i] == NO_LANDMARK {
+            if f.is_stereo() && self.map.kf(slot).landmark[i] == NO_LANDMARK && !self.blocked[i] {
                 let key = (u64::from(f.depth_m.to_bits()) << 32) | i as u64;
                 let _ = self.order_keys.push(key);
             }
@@ -268,7 +278,7 @@ impl LocalMap {
             self.grid.build(&self.map.kf(n).features, self.width, self.height);
             let r21 = t2.rot * t1.rot.transpose();
             for i1 in 0..frame.features.len() {
-                if self.map.kf(slot).landmark[i1] != NO_LANDMARK {
+                if self.map.kf(slot).landmark[i1] != NO_LANDMARK || self.blocked[i1] {
                     continue;
                 }
                 let f1 = frame.features[i1];

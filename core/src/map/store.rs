@@ -86,6 +86,9 @@ pub struct Landmark {
     pub class_hist: [u8; NUM_CLASSES],
     /// Semantic descriptor of its latest keyframe observation on a class boundary.
     pub sem: Option<SemDesc>,
+    /// Accumulated evidence (log-odds, without the class prior) that the landmark's object
+    /// moves, from the motion test ([`crate::motion`]); 0 when never tested.
+    pub moving_lo: f32,
 }
 
 impl Landmark {
@@ -104,6 +107,7 @@ impl Landmark {
         alive: false,
         class_hist: [0; NUM_CLASSES],
         sem: None,
+        moving_lo: 0.0,
     };
 
     /// The observations.
@@ -581,6 +585,10 @@ impl Map {
         into_l.found = into_l.found.saturating_add(l.found);
         for (a, b) in into_l.class_hist.iter_mut().zip(l.class_hist.iter()) {
             *a = a.saturating_add(*b);
+        }
+        // Two views of one point: the stronger motion evidence either way wins.
+        if l.moving_lo.abs() > into_l.moving_lo.abs() {
+            into_l.moving_lo = l.moving_lo;
         }
         self.remove_landmark(from);
         self.counters.landmarks_fused += 1;

@@ -30,8 +30,13 @@ use crate::geom::{Se3, StereoCamera};
 use crate::map::{
     measurement, renormalize, LocalMap, LocalSet, Map, MappingParams, NewKeyframe, NO_LANDMARK,
 };
-use crate::optim::PoseOptParams;
+use crate::motion::{
+    FeatureMotion, MotionParams, MotionReport, MotionScratch, MAX_LANDMARK_LOGIT, MOVING_LOGIT,
+    STATIC_LOGIT,
+};
+use crate::optim::{chi2, PoseOptParams};
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
+use crate::seg::is_dynamic;
 
 /// Tracker settings; defaults follow ORB-SLAM2's stereo KITTI configuration where it has one.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -75,6 +80,9 @@ pub struct TrackerParams {
     pub association: Association,
     /// EM settings (used with [`Association::Em`]).
     pub em: EmParams,
+    /// Motion test settings (used when motion-aware semantics are on,
+    /// [`Tracker::set_motion_aware`]).
+    pub motion: MotionParams,
 }
 
 impl Default for TrackerParams {
@@ -97,6 +105,7 @@ impl Default for TrackerParams {
             ransac_iterations: 100,
             association: Association::Hard,
             em: EmParams::default(),
+            motion: MotionParams::default(),
         }
     }
 }
@@ -142,6 +151,8 @@ pub struct FrameReport {
     pub ba_iterations: u32,
     /// Features whose EM association differs from the nearest-neighbour candidate.
     pub em_changed: u32,
+    /// The motion test of motion-aware semantics (all zero when off).
+    pub motion: MotionReport,
 }
 
 /// Counters over the whole run.
@@ -165,6 +176,12 @@ pub struct TrackerStats {
     pub triangulated: u32,
     /// Duplicate landmarks merged by fusion.
     pub landmarks_fused: u32,
+    /// Dynamic-class features used as parked (motion-aware semantics), over the run.
+    pub parked_features: u32,
+    /// Dynamic-class features removed as moving, over the run.
+    pub moving_features: u32,
+    /// Dynamic-class features removed for lack of evidence, over the run.
+    pub unproven_features: u32,
 }
 
 /// Why a tracker cannot be built.
@@ -215,6 +232,8 @@ pub struct Tracker {
     problem: PoseProblem,
     corr: Vec<Correspondence, FRAME_CAPACITY>,
     em: EmScratch,
+    motion_aware: bool,
+    motion: MotionScratch,
 }
 
 /// Memory budget of one tracker (bytes), checked at compile time: the ECU target gives the
@@ -258,7 +277,28 @@ impl Tracker {
             problem,
             corr: Vec::new(),
             em: EmScratch::new(),
+            motion_aware: false,
+            motion: MotionScratch::new(),
         })
+    }
+
+    /// Turns motion-aware semantics on or off ([`crate::motion`]): dynamic-class features are
+    /// then used where their object is tested static and removed where it moves. Meant for
+    /// frames whose extractor keeps dynamic-class features
+    /// ([`crate::seg::WeightScheme::Motion`]).
+    pub fn set_motion_aware(&mut self, on: bool) {
+        self.motion_aware = on;
+    }
+
+    /// Whether motion-aware semantics are on.
+    pub fn motion_aware(&self) -> bool {
+        self.motion_aware
+    }
+
+    /// What the motion test made of each feature of the last processed frame (all
+    /// [`FeatureMotion::Static`] when motion-aware semantics are off).
+    pub fn feature_motion(&self) -> &[FeatureMotion] {
+        &self.motion.state[..self.last_features.min(FRAME_CAPACITY)]
     }
 
     /// Forgets the map and the motion; the next frame initialises again at the identity.
@@ -340,7 +380,9 @@ impl Tracker {
             keyframes: 0,
             ba_iterations: 0,
             em_changed: 0,
+            motion: MotionReport::default(),
         };
+        self.motion.reset(frame.features.len());
         let last = self.t_cw;
         // Every pose that feeds back into the next frame is re-orthonormalised: the
         // constant-velocity loop multiplies any drift of R from a rotation about threefold per
@@ -401,6 +443,7 @@ impl Tracker {
         if matched < 30 {
             matched = self.search_pass(feats, self.params.wide_radius_px * 3.0, false);
         }
+        matched -= self.hold_unproven(feats);
         if matched < 10 {
             return false;
         }
@@ -429,7 +472,8 @@ impl Tracker {
         self.problem.drop_outliers(&mut self.matches);
         self.local.update(self.map.map_mut(), &self.matches.lm[..feats.len()], self.frame_index);
         matched = self.search_pass(feats, self.params.narrow_radius_px, true);
-        let inliers = if self.params.association == Association::Em {
+        self.hold_unproven(feats);
+        let mut inliers = if self.params.association == Association::Em {
             let input = EmInput {
                 frame,
                 window: self.map.map(),
@@ -448,6 +492,20 @@ impl Tracker {
             self.problem.drop_outliers(&mut self.matches);
             inliers
         };
+        if self.motion_aware {
+            let (report, relinked) = self.motion_test(feats);
+            rep.motion = report;
+            self.stats.parked_features += report.parked_features;
+            self.stats.moving_features += report.moving_features;
+            self.stats.unproven_features += report.unproven_features;
+            if relinked > 0 {
+                // Parked objects rejoin the pose (moving ones leave it): one more solve.
+                self.problem.collect(self.map.map(), feats, &self.matches, true);
+                let params = PoseOptParams::default();
+                inliers = self.problem.solve(&self.cam, &mut self.t_cw, true, &params).inliers;
+                self.problem.drop_outliers(&mut self.matches);
+            }
+        }
         rep.matched = matched;
         rep.inliers = inliers;
         let window = self.map.map_mut();
@@ -483,6 +541,111 @@ impl Tracker {
             &mut self.matches,
             &mut self.em.cands,
         )
+    }
+
+    /// Motion-aware semantics: takes the matches of dynamic-class features whose landmark is
+    /// not confirmed static, and any match to a landmark confirmed moving, out of the pose
+    /// problem (and EM's candidates), remembering them for [`Self::motion_test`]. Holds nothing
+    /// when fewer than 30 other matches would remain (a frame filled by a wrongly labelled
+    /// "car" is still tracked). Returns how many matches it held.
+    fn hold_unproven(&mut self, feats: &[Feature]) -> u32 {
+        if !self.motion_aware {
+            return 0;
+        }
+        let n = feats.len();
+        let m = &mut self.motion;
+        m.cand[..n].fill(NO_LANDMARK);
+        m.held[..n].fill(false);
+        let window = self.map.map();
+        let (mut held, mut kept) = (0u32, 0u32);
+        for (i, f) in feats.iter().enumerate() {
+            let id = self.matches.lm[i];
+            if id == NO_LANDMARK {
+                continue;
+            }
+            let lo = window.lm(id).moving_lo;
+            let dynamic = is_dynamic(f.class);
+            if dynamic {
+                m.cand[i] = id;
+            }
+            // Static-class features leave a landmark only on strong evidence (p > 0.88 without
+            // a prior): labels flicker at object borders.
+            let hold = if dynamic {
+                self.params.motion.prior_logit(f.class) + lo >= STATIC_LOGIT
+            } else {
+                lo > MOVING_LOGIT + 2.0
+            };
+            if hold {
+                m.cand[i] = id;
+                m.held[i] = true;
+                held += 1;
+            } else {
+                kept += 1;
+            }
+        }
+        if held == 0 || kept < 30 {
+            m.held[..n].fill(false);
+            return 0;
+        }
+        for i in 0..n {
+            if m.held[i] {
+                self.matches.lm[i] = NO_LANDMARK;
+                self.em.cands[i] = crate::assoc::Candidates::EMPTY;
+            }
+        }
+        held
+    }
+
+    /// Motion-aware semantics after the pose solve: measures every remembered dynamic-class
+    /// match at the solved pose, segments the objects and decides which are parked, moving or
+    /// unproven ([`MotionScratch::decide`]). Consistent matches of parked objects are linked
+    /// again; matches of moving ones are unlinked. Returns the report and how many links
+    /// changed (the pose is then solved again).
+    fn motion_test(&mut self, feats: &[Feature]) -> (MotionReport, u32) {
+        let window = self.map.map_mut();
+        for (i, f) in feats.iter().enumerate() {
+            let id = self.motion.cand[i];
+            if id == NO_LANDMARK {
+                continue;
+            }
+            let z = measurement(f, self.problem.far_m);
+            let pc = self.t_cw.transform_point(&window.lm(id).p_w);
+            match chi2(&self.cam, &pc, &z) {
+                Some(c) => {
+                    self.motion.chi2[i] = c as f32;
+                    self.motion.gate[i] = z.chi2_threshold() as f32;
+                }
+                None => self.motion.chi2[i] = -1.0,
+            }
+        }
+        let report = self.motion.decide(feats, &self.cam, &self.params.motion, |id, e| {
+            let l = window.lm_mut(id);
+            l.moving_lo = (l.moving_lo + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
+            l.moving_lo
+        });
+        let mut relinked = 0;
+        for i in 0..feats.len() {
+            match self.motion.state[i] {
+                FeatureMotion::Parked => {
+                    let ok =
+                        self.motion.chi2[i] >= 0.0 && self.motion.chi2[i] <= self.motion.gate[i];
+                    if self.motion.held[i] && ok {
+                        self.matches.lm[i] = self.motion.cand[i];
+                        self.matches.weight[i] = 1.0;
+                        relinked += 1;
+                    }
+                }
+                FeatureMotion::Moving => {
+                    if self.matches.lm[i] != NO_LANDMARK {
+                        // Only when nothing was held (too few other matches) was it solved with.
+                        self.matches.unlink(i);
+                        relinked += 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+        (report, relinked)
     }
 
     /// RANSAC over the wide-pass matches: the best three-point hypothesis if it explains more
@@ -584,6 +747,7 @@ impl Tracker {
             t_cw: self.t_cw,
             landmark: &self.matches.lm,
             weight: &self.matches.weight,
+            blocked: self.motion_aware.then_some(&self.motion.blocked),
         };
         let out = self.map.insert_keyframe(&self.cam, &params, &kf, self.frame_index);
         rep.new_landmarks = out.new_landmarks + out.triangulated;

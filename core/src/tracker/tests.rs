@@ -248,3 +248,82 @@ fn far_points_are_mapped_by_triangulation_within_capacity() {
         assert_eq!(s.landmark_overflow + s.keyframe_evictions + s.observation_overflow, 0);
     });
 }
+
+/// Points on the surface of a car-sized box centred at `c` (x across, y down, z along).
+fn car(rng: &mut Rng, c: Vector3<f64>, n: usize) -> StdVec<Point> {
+    (0..n)
+        .map(|_| {
+            let (u, v) = (rng.unit() - 0.5, rng.unit());
+            // Side facing the road centre (x = c.x ∓ 0.9) and the back (z = c.z - 2.15).
+            let p = if rng.next_u64() % 2 == 0 {
+                let sx = if c.x > 0.0 { -0.9 } else { 0.9 };
+                Vector3::new(c.x + sx, c.y - v * 1.4, c.z + u * 4.3)
+            } else {
+                Vector3::new(c.x + u * 1.8, c.y - v * 1.4, c.z - 2.15)
+            };
+            let mut d = [0u8; 32];
+            for b in d.iter_mut() {
+                *b = rng.next_u64() as u8;
+            }
+            (p, d, 10.0 + rng.unit() * 40.0)
+        })
+        .collect()
+}
+
+/// Motion-aware semantics on a street with a row of parked cars and a car driving ahead:
+/// the parked cars' features are used, the moving car's removed, and the pose stays right.
+#[test]
+fn motion_aware_tracking_keeps_parked_cars_and_drops_a_moving_one() {
+    run_on_big_stack(|| {
+        let mut rng = Rng::new(0x9a4c_ed00_0000_0007);
+        let pts = world(&mut rng);
+        let mut parked = StdVec::new();
+        for k in 0..8 {
+            parked.extend(car(&mut rng, Vector3::new(4.2, 1.6, 12.0 + 6.0 * k as f64), 60));
+        }
+        let moving = car(&mut rng, Vector3::new(-2.0, 1.6, 12.0), 150);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        tracker.set_motion_aware(true);
+        let (mut parked_used, mut parked_total) = (0usize, 0usize);
+        let (mut moving_removed, mut moving_total) = (0usize, 0usize);
+        let mut max_err: f64 = 0.0;
+        for k in 0..30 {
+            let gt = truth(k);
+            // Static world plus parked cars (class car), then the moving car, 1.6 m/frame
+            // (0.6 m/frame faster than the camera).
+            let mut frame = render(&pts, &gt, &mut rng);
+            let n_static = frame.features.len();
+            let extra = render(&parked, &gt, &mut rng);
+            for f in extra.features.iter() {
+                let _ = frame.features.push(Feature { class: 8, ..*f });
+            }
+            let n_parked = frame.features.len();
+            let shifted: StdVec<Point> = moving
+                .iter()
+                .map(|(p, d, nat)| (p + Vector3::new(0.0, 0.0, 1.6 * k as f64), *d, *nat))
+                .collect();
+            let extra = render(&shifted, &gt, &mut rng);
+            for f in extra.features.iter() {
+                let _ = frame.features.push(Feature { class: 8, ..*f });
+            }
+            let rep = tracker.process(&frame);
+            assert!(!rep.lost, "frame {k}: lost");
+            max_err = max_err.max((rep.t_wc.trans - gt.trans).norm());
+            if k >= 5 {
+                let st = tracker.feature_motion();
+                parked_total += n_parked - n_static;
+                parked_used +=
+                    st[n_static..n_parked].iter().filter(|&&m| m == FeatureMotion::Parked).count();
+                moving_total += st.len() - n_parked;
+                moving_removed += st[n_parked..].iter().filter(|m| m.removed()).count();
+            }
+        }
+        let used = parked_used as f64 / parked_total as f64;
+        let removed = moving_removed as f64 / moving_total as f64;
+        assert!(used > 0.7, "parked-car features used: {used:.3} of {parked_total}");
+        assert!(removed > 0.95, "moving-car features removed: {removed:.3} of {moving_total}");
+        assert!(max_err < 0.1, "max position error {max_err} m");
+        let s = tracker.stats();
+        assert!(s.parked_features > 0 && s.unproven_features + s.moving_features > 0, "{s:?}");
+    });
+}

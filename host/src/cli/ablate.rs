@@ -35,7 +35,7 @@ pub struct AblateArgs {
     #[arg(long, value_name = "SLM")]
     pub model: Option<PathBuf>,
     /// Semantic settings to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "off,cull,full")]
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "off,cull,full,motion")]
     pub semantics: Vec<SemanticsArg>,
     /// Association settings to run (comma-separated).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "hard,em")]

@@ -34,14 +34,15 @@ pub struct RunArgs {
     pub ransac_iterations: u32,
     /// Semantic weighting of features: `off` (geometric backbone), `cull` (no features on
     /// dynamic classes), `full` (the paper's semantic ORB: cull dynamic, ×3 construction and
-    /// object classes). Labels come from the int8 network given with --model, else from the
+    /// object classes), `motion` (as full, but features on cars, pedestrians and cyclists are removed
+    /// only where the object is tested moving against the ego-motion). Labels come from the int8 network given with --model, else from the
     /// sequence's `semantic/` folder (ground-truth labels, as `semloc synth` writes them); with
     /// neither it is an error.
     #[arg(long, value_enum, default_value_t = SemanticsArg::Off)]
     pub semantics: SemanticsArg,
     /// The segmentation network (`.slm`, from `semloc convert`; e.g.
     /// models/artefacts/fastscnn_r2_192x640.slm) that labels every left frame, pipelined on the
-    /// second thread. Used when --semantics is cull or full.
+    /// second thread. Used when --semantics is cull, full or motion.
     #[arg(long, value_name = "SLM")]
     pub model: Option<PathBuf>,
     /// Data association: `hard` (nearest neighbour in descriptor space, ORB-SLAM2) or `em`
@@ -81,6 +82,9 @@ pub enum SemanticsArg {
     Cull,
     /// Cull dynamic classes and weight construction/object classes ×3.
     Full,
+    /// As full, but dynamic-class features are removed only where their object moves
+    /// (tested against the ego-motion; parked cars and standing pedestrians are kept).
+    Motion,
 }
 
 impl From<SemanticsArg> for Semantics {
@@ -89,6 +93,7 @@ impl From<SemanticsArg> for Semantics {
             SemanticsArg::Off => Self::Off,
             SemanticsArg::Cull => Self::Cull,
             SemanticsArg::Full => Self::Full,
+            SemanticsArg::Motion => Self::Motion,
         }
     }
 }

@@ -48,6 +48,8 @@ pub enum DynamicsArg {
     Low,
     /// Dense traffic covering ≥ 30 % of many frames.
     High,
+    /// Low traffic in a street lined with parked cars, people standing on the pavements.
+    Parked,
 }
 
 impl From<DynamicsArg> for Dynamics {
@@ -56,6 +58,7 @@ impl From<DynamicsArg> for Dynamics {
             DynamicsArg::Static => Dynamics::Static,
             DynamicsArg::Low => Dynamics::Low,
             DynamicsArg::High => Dynamics::High,
+            DynamicsArg::Parked => Dynamics::Parked,
         }
     }
 }

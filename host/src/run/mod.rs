@@ -20,8 +20,11 @@ use std::path::{Path, PathBuf};
 
 use semloc_core::assoc::Association;
 use semloc_core::geom::Se3;
+use semloc_core::motion::FeatureMotion;
 use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
+
+use image::GrayImage;
 
 use crate::dataset::Sequence;
 use crate::eval::{Align, EvalError, EvalReport};
@@ -42,6 +45,9 @@ pub enum Semantics {
     Cull,
     /// Cull dynamic classes and weight construction/object classes ×3 (semantic ORB, Eq. 2).
     Full,
+    /// Motion-aware semantics (beyond the paper): semantic ORB's ×3 on construction/object,
+    /// and features on dynamic classes removed only where their object is tested moving.
+    Motion,
 }
 
 impl Semantics {
@@ -51,15 +57,17 @@ impl Semantics {
             Self::Off => None,
             Self::Cull => Some(WeightScheme::Cull),
             Self::Full => Some(WeightScheme::Full),
+            Self::Motion => Some(WeightScheme::Motion),
         }
     }
 
-    /// The setting's name in `summary.json` and tables: `off`, `cull`, `full`.
+    /// The setting's name in `summary.json` and tables: `off`, `cull`, `full`, `motion`.
     pub fn name(self) -> &'static str {
         match self {
             Self::Off => "off",
             Self::Cull => "cull",
             Self::Full => "full",
+            Self::Motion => "motion",
         }
     }
 }
@@ -127,6 +135,77 @@ pub struct FrameRecord {
     pub timestamp_s: f64,
     /// What the pipeline returned for it.
     pub output: FrameOutput,
+    /// With motion-aware semantics on a source that has a moving-object mask: the features
+    /// the motion test removed, scored against the mask.
+    pub moving_check: Option<MovingCheck>,
+}
+
+/// One frame's features scored against the ground-truth moving-object mask: "called moving"
+/// is a feature the motion test removed (moving or unproven, [`FeatureMotion::removed`]); a
+/// feature is truly moving when the mask is set at its key point.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct MovingCheck {
+    /// Removed and on a moving object.
+    pub true_pos: u32,
+    /// Removed but static.
+    pub false_pos: u32,
+    /// Kept but on a moving object.
+    pub false_neg: u32,
+    /// Removed as moving (tested), of `true_pos + false_pos`.
+    pub tested_moving: u32,
+    /// Of `tested_moving`, on a moving object.
+    pub tested_moving_true: u32,
+    /// Used as parked (tested static) but on a moving object.
+    pub tested_parked_moving: u32,
+}
+
+impl MovingCheck {
+    /// Sums two checks.
+    pub fn add(&mut self, o: &MovingCheck) {
+        self.true_pos += o.true_pos;
+        self.false_pos += o.false_pos;
+        self.false_neg += o.false_neg;
+        self.tested_moving += o.tested_moving;
+        self.tested_moving_true += o.tested_moving_true;
+        self.tested_parked_moving += o.tested_parked_moving;
+    }
+    /// Precision of "called moving" (NaN when nothing was called moving).
+    pub fn precision(&self) -> f64 {
+        f64::from(self.true_pos) / f64::from(self.true_pos + self.false_pos)
+    }
+    /// Recall of the moving features (NaN when none moved).
+    pub fn recall(&self) -> f64 {
+        f64::from(self.true_pos) / f64::from(self.true_pos + self.false_neg)
+    }
+}
+
+/// Scores the last tracked frame's features against `mask` (see [`MovingCheck`]).
+pub fn moving_check(pipe: &Pipeline, mask: &GrayImage) -> MovingCheck {
+    let feats = &pipe.localiser().frame().features;
+    let states = pipe.tracker().feature_motion();
+    let mut c = MovingCheck::default();
+    for (f, st) in feats.iter().zip(states.iter()) {
+        let (x, y) = (
+            (f.x.round() as u32).min(mask.width() - 1),
+            (f.y.round() as u32).min(mask.height() - 1),
+        );
+        let truth = mask.get_pixel(x, y).0[0] != 0;
+        let called = st.removed();
+        match (called, truth) {
+            (true, true) => c.true_pos += 1,
+            (true, false) => c.false_pos += 1,
+            (false, true) => c.false_neg += 1,
+            _ => {}
+        }
+        if *st == FeatureMotion::Moving {
+            c.tested_moving += 1;
+            c.tested_moving_true += u32::from(truth);
+        }
+        if *st == FeatureMotion::Parked {
+            c.tested_parked_moving += u32::from(truth);
+        }
+    }
+    c
 }
 
 /// What one run produced (everything in it is also in the output folder).
@@ -266,7 +345,12 @@ pub fn track_frames(
     for i in 0..n {
         match pipe.process_frame(src, i) {
             Ok(output) => {
-                let record = FrameRecord { timestamp_s: src.timestamp_s(i), output };
+                let moving_check = if pipe.tracker().motion_aware() {
+                    src.moving_mask(i).map(|m| moving_check(pipe, &m))
+                } else {
+                    None
+                };
+                let record = FrameRecord { timestamp_s: src.timestamp_s(i), output, moving_check };
                 on_frame(&record);
                 frames.push(record);
             }

@@ -14,14 +14,15 @@ use semloc_core::geom::Se3;
 use semloc_core::tracker::TrackerStats;
 
 use super::stats::{column, median, stage_percentiles, Percentiles};
-use super::{association_name, FrameRecord, RunError};
+use super::{association_name, FrameRecord, MovingCheck, RunError};
 use crate::dataset::{DatasetSummary, Sequence};
 use crate::eval::{evaluate, Align, EvalReport};
 
 /// Header line of `frames.csv`; [`write_frames_csv`] writes one row of these columns per frame.
 pub const FRAMES_CSV_HEADER: &str = "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,\
     extract_wall_ms,stereo_ms,track_ms,seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,\
-    keyframe,lost,initialised,landmarks,keyframes,ba_iterations,culled,em_changed";
+    keyframe,lost,initialised,landmarks,keyframes,ba_iterations,culled,em_changed,parked,moving,\
+    unproven";
 
 /// What `summary.json` holds.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -46,8 +47,24 @@ pub struct Summary {
     pub association: String,
     pub median_culled: f64,
     pub em_changed_total: u64,
+    pub motion: Option<MotionSummary>,
     pub timing: BTreeMap<&'static str, Percentiles>,
     pub eval: Option<EvalSummary>,
+}
+
+/// Motion-aware semantics' totals inside `summary.json` (`null` with other settings).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[allow(missing_docs)]
+pub struct MotionSummary {
+    /// Dynamic-class features used as parked, removed as moving, removed as unproven.
+    pub parked_features: u32,
+    pub moving_features: u32,
+    pub unproven_features: u32,
+    /// Against the source's moving-object mask, when it has one (`semloc synth`'s `dynamic/`):
+    /// the summed counts, precision and recall of "removed" (moving or unproven).
+    pub moving_check: Option<MovingCheck>,
+    pub moving_precision: Option<f64>,
+    pub moving_recall: Option<f64>,
 }
 
 /// The evaluation figures inside `summary.json`.
@@ -121,8 +138,25 @@ pub(super) fn summarise(
         association: association_name(inputs.association),
         em_changed_total: frames.iter().map(|r| u64::from(r.output.report.em_changed)).sum(),
         median_culled: counter(|r| f64::from(r.output.culled)),
+        motion: (inputs.semantics == "motion").then(|| motion_summary(frames, &inputs.stats)),
         timing: stage_percentiles(frames, inputs.segment_timed),
         eval: eval.map(EvalSummary::from),
+    }
+}
+
+fn motion_summary(frames: &[FrameRecord], stats: &TrackerStats) -> MotionSummary {
+    let mut check: Option<MovingCheck> = None;
+    for c in frames.iter().filter_map(|r| r.moving_check.as_ref()) {
+        check.get_or_insert_with(MovingCheck::default).add(c);
+    }
+    let finite = |x: f64| x.is_finite().then_some(x);
+    MotionSummary {
+        parked_features: stats.parked_features,
+        moving_features: stats.moving_features,
+        unproven_features: stats.unproven_features,
+        moving_precision: check.and_then(|c| finite(c.precision())),
+        moving_recall: check.and_then(|c| finite(c.recall())),
+        moving_check: check,
     }
 }
 
@@ -149,7 +183,7 @@ pub fn write_frames_csv(path: &Path, frames: &[FrameRecord]) -> Result<(), RunEr
             let (s, rep) = (o.times, o.report);
             writeln!(
                 f,
-                "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{}",
+                "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                 rep.frame_index,
                 s.load_ms,
                 s.orb_left_ms,
@@ -170,7 +204,10 @@ pub fn write_frames_csv(path: &Path, frames: &[FrameRecord]) -> Result<(), RunEr
                 rep.keyframes,
                 rep.ba_iterations,
                 o.culled,
-                rep.em_changed
+                rep.em_changed,
+                rep.motion.parked_features,
+                rep.motion.moving_features,
+                rep.motion.unproven_features
             )?;
         }
         f.flush()

@@ -100,6 +100,10 @@ pub enum Dynamics {
     /// Dense traffic: a truck and a cyclist leading the ego, overtaking and oncoming cars,
     /// crowds; moving objects cover ≥ 30 % of many frames.
     High,
+    /// `low`'s traffic in a street lined with parked cars (the parking strips' empty slots
+    /// filled, as KITTI's residential streets) and people standing on the pavements: most
+    /// car and pedestrian pixels do not move. The street is `static`'s plus the extra cars.
+    Parked,
 }
 
 impl core::fmt::Display for Dynamics {
@@ -108,6 +112,7 @@ impl core::fmt::Display for Dynamics {
             Dynamics::Static => "static",
             Dynamics::Low => "low",
             Dynamics::High => "high",
+            Dynamics::Parked => "parked",
         })
     }
 }
@@ -293,7 +298,7 @@ impl Scene {
         // The street depends on the seed only; its length is rounded up so that sequences of
         // different lengths with one seed share their beginning.
         let len = ((travel + 260.0) / 500.0).ceil() * 500.0;
-        let world = World::build(len, &mut rng_world);
+        let world = World::build(len, &mut rng_world, cfg.dynamics == Dynamics::Parked);
         let mut rng_agents = Rng::new(cfg.seed.wrapping_mul(7).wrapping_add(2));
         let agents = scene::agents(cfg.dynamics, &world.path, &ego, &mut rng_agents);
         let phase = rng_ego.range(0.0, core::f64::consts::TAU);

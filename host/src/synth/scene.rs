@@ -411,8 +411,10 @@ impl Builder {
 }
 
 impl World {
-    /// Builds the static world along a fresh path of at least `len` metres.
-    pub(crate) fn build(len: f64, rng: &mut Rng) -> Self {
+    /// Builds the static world along a fresh path of at least `len` metres. `kerb_rows` fills
+    /// the parking strips' empty slots too (rows of parked cars, as in KITTI's residential
+    /// streets) from a generator of their own, so the street is otherwise the same.
+    pub(crate) fn build(len: f64, rng: &mut Rng, kerb_rows: bool) -> Self {
         let path = Path::generate(len + 60.0, rng);
         let mut b = Builder { items: Vec::new(), anchor: 0.0 };
         let total = path.len() - 2.0;
@@ -480,7 +482,7 @@ impl World {
             }
         }
         for side in [-1.0f64, 1.0] {
-            street_side(&mut b, &path, side, total, rng);
+            street_side(&mut b, &path, side, total, rng, kerb_rows);
         }
         b.items.sort_by(|x, y| x.0.total_cmp(&y.0));
         let nb = (total / BUCKET).ceil() as usize + 2;
@@ -589,7 +591,14 @@ fn tree(b: &mut Builder, base: V3, t: V3, rng: &mut Rng) {
     }
 }
 
-fn street_side(b: &mut Builder, path: &Path, side: f64, total: f64, rng: &mut Rng) {
+fn street_side(
+    b: &mut Builder,
+    path: &Path,
+    side: f64,
+    total: f64,
+    rng: &mut Rng,
+    kerb_rows: bool,
+) {
     // Buildings, parks with fences, trees, lamp posts, signs, parked cars.
     let mut s = rng.range(0.0, 8.0);
     while s < total - 30.0 {
@@ -748,13 +757,21 @@ fn street_side(b: &mut Builder, path: &Path, side: f64, total: f64, rng: &mut Rn
             s += 3.0;
             continue;
         }
-        if rng.chance(0.55) {
+        let park = |b: &mut Builder, rng: &mut Rng| {
             b.anchor = s;
             let p = path.point(s, side * (layout::PARKING + rng.range(-0.1, 0.2)), 0.0);
             let (_, t, _) = path.frame(s);
             let f = if rng.chance(0.8) { t } else { mul3(t, -1.0) };
             let kind = if rng.chance(0.15) { VehicleKind::Van } else { VehicleKind::Car };
             vehicle(b, p, f, kind, paint(rng), rng.u32(), false);
+        };
+        if rng.chance(0.55) {
+            park(b, rng);
+        } else if kerb_rows {
+            let mut own = Rng::new(s.to_bits() ^ side.to_bits() ^ 0x6b65_7262_726f_7773);
+            if own.chance(0.85) {
+                park(b, &mut own);
+            }
         }
         s += rng.range(5.2, 8.0);
     }
@@ -869,7 +886,16 @@ fn vehicle(b: &mut Builder, c: V3, f: V3, kind: VehicleKind, paint: Rgb, seed: u
 
 /// A person: `cyclist` draws a rider on a bicycle, else a walker at stride `phase` (radians).
 #[allow(clippy::too_many_arguments)]
-fn person(b: &mut Builder, c: V3, f: V3, phase: f64, cloth: [Rgb; 2], seed: u32, cyclist: bool) {
+fn person(
+    b: &mut Builder,
+    c: V3,
+    f: V3,
+    phase: f64,
+    cloth: [Rgb; 2],
+    seed: u32,
+    cyclist: bool,
+    dynamic: bool,
+) {
     let cls = if cyclist { class::BICYCLIST } else { class::PEDESTRIAN };
     let r = cross3(DOWN, f);
     let pm = |part: PPart| Mat::Person { cloth, part, seed };
@@ -879,29 +905,29 @@ fn person(b: &mut Builder, c: V3, f: V3, phase: f64, cloth: [Rgb; 2], seed: u32,
         let swing = if cyclist { 0.0 } else { 0.18 * (phase + k).sin() };
         let lift = if cyclist { 0.12 * (phase + k).sin() } else { 0.0 };
         let p = add3(c, add3(mul3(f, swing), mul3(r, dr * 0.11)));
-        b.boxed(p, f, 0.16, 0.14, leg0 + lift.max(0.0), leg1, cls, true, &|face, _| {
+        b.boxed(p, f, 0.16, 0.14, leg0 + lift.max(0.0), leg1, cls, dynamic, &|face, _| {
             (face < 4).then_some(pm(PPart::Legs))
         });
     }
     let tc = add3(c, mul3(f, lean));
-    b.boxed(tc, f, 0.26, 0.44, leg1, torso1, cls, true, &|_, _| Some(pm(PPart::Torso)));
+    b.boxed(tc, f, 0.26, 0.44, leg1, torso1, cls, dynamic, &|_, _| Some(pm(PPart::Torso)));
     let hc = add3(c, mul3(f, lean * 1.4));
-    b.boxed(hc, f, 0.21, 0.19, torso1 + 0.03, torso1 + 0.28, cls, true, &|face, _| {
+    b.boxed(hc, f, 0.21, 0.19, torso1 + 0.03, torso1 + 0.28, cls, dynamic, &|face, _| {
         Some(pm(PPart::Head { front: face == 0 }))
     });
     if cyclist {
         // The bicycle: a cut-out side profile through the rider's centre line.
         let a = sub3(c, mul3(f, 0.85));
         let bb = add3(c, mul3(f, 0.85));
-        b.vquad(a, bb, 0.0, 1.05, Mat::Bike, cls, true);
-        b.vquad(bb, a, 0.0, 1.05, Mat::Bike, cls, true);
+        b.vquad(a, bb, 0.0, 1.05, Mat::Bike, cls, dynamic);
+        b.vquad(bb, a, 0.0, 1.05, Mat::Bike, cls, dynamic);
         if let Some(last) = b.items.last_mut() {
             // Same profile from the other side: u must still run rear → front.
             last.1.map = Map::Affine { o: [a[0], 0.0, a[2]], eu: f, ev: UP };
         }
         // Rear rack with a bag: a solid target on the cyclist seen from behind.
         let rc = sub3(c, mul3(f, 0.6));
-        b.boxed(rc, f, 0.35, 0.3, 0.55, 0.85, cls, true, &|_, _| Some(pm(PPart::Legs)));
+        b.boxed(rc, f, 0.35, 0.3, 0.55, 0.85, cls, dynamic, &|_, _| Some(pm(PPart::Legs)));
     }
 }
 
@@ -1020,7 +1046,7 @@ pub(crate) fn agents(level: Dynamics, path: &Path, ego: &EgoTrack, rng: &mut Rng
     let s_end = ego.s.last().copied().unwrap_or(EGO_START);
     let (oncoming_every, ped_every, overtake_every) = match level {
         Dynamics::Static => return out,
-        Dynamics::Low => (14.0, 60.0, f64::INFINITY),
+        Dynamics::Low | Dynamics::Parked => (14.0, 60.0, f64::INFINITY),
         Dynamics::High => (3.5, 14.0, 4.0),
     };
     let veh = |rng: &mut Rng, truck_p: f64| {
@@ -1100,8 +1126,27 @@ pub(crate) fn agents(level: Dynamics, path: &Path, ego: &EgoTrack, rng: &mut Rng
             }
         }
     }
+    if level == Dynamics::Parked {
+        // People standing on the pavements, alone or in twos and threes (a bus stop, a chat):
+        // pedestrians by class, static by motion.
+        let mut s = EGO_START + rng.range(3.0, 10.0);
+        while s < s_end + 120.0 {
+            let side = if rng.chance(0.5) { 1.0 } else { -1.0 };
+            let lat = side * rng.range(layout::KERB + 0.6, layout::BUILDING - 0.8);
+            if !path.near_junction(s, 9.0) {
+                for k in 0..1 + (rng.u32() % 3) {
+                    out.push(Agent {
+                        kind: AgentKind::Pedestrian(cloth(rng)),
+                        motion: Motion::Lane { s0: s + 0.7 * f64::from(k), v: 0.0, lat },
+                        seed: rng.u32(),
+                    });
+                }
+            }
+            s += rng.range(8.0, 16.0);
+        }
+    }
     match level {
-        Dynamics::Low => {
+        Dynamics::Low | Dynamics::Parked => {
             // A car far ahead in the other lane of our direction.
             out.push(Agent {
                 kind: veh(rng, 0.0),
@@ -1203,12 +1248,15 @@ pub(crate) fn agent_prims(
             continue;
         }
         let c = path.point(s, lat, 0.0);
+        // Standing agents (v = 0) are drawn as what they are but are not in the moving mask.
+        let moving = !matches!(a.motion, Motion::Lane { v, .. } if v == 0.0);
         match a.kind {
-            AgentKind::Vehicle(kind, p) => vehicle(&mut b, c, f, kind, p, a.seed, true),
+            AgentKind::Vehicle(kind, p) => vehicle(&mut b, c, f, kind, p, a.seed, moving),
             AgentKind::Pedestrian(cl) => {
-                person(&mut b, c, f, dist / 0.7 * core::f64::consts::PI, cl, a.seed, false)
+                let phase = dist / 0.7 * core::f64::consts::PI;
+                person(&mut b, c, f, phase, cl, a.seed, false, moving)
             }
-            AgentKind::Cyclist(cl) => person(&mut b, c, f, dist / 2.0, cl, a.seed, true),
+            AgentKind::Cyclist(cl) => person(&mut b, c, f, dist / 2.0, cl, a.seed, true, moving),
         }
     }
     out.extend(b.items.into_iter().map(|(_, p)| p));
