@@ -175,8 +175,10 @@ def quantise_weights(graph, qparams):
 # ---------------------------------------------------------------------------------------------
 
 
-def padded_images(split, n, limit_offset=None):
-    ds = camvid.CamVid(split, augment=False)
+def padded_images(split, n, limit_offset=None, holdout=""):
+    items = (camvid.list_sequences(camvid.DEFAULT_ROOT, ["train", "val"], exclude={holdout})
+             if holdout else None)
+    ds = camvid.CamVid(split, augment=False, items=items)
     idx = list(range(len(ds)))
     if n and n < len(idx):  # evenly spread over the split (sequences differ along it)
         idx = [idx[int(i * len(idx) / n)] for i in range(n)]
@@ -184,8 +186,8 @@ def padded_images(split, n, limit_offset=None):
 
 
 @torch.no_grad()
-def calibrate(graph, n, method="minmax", pct=99.99):
-    ds, idx = padded_images("train", n)
+def calibrate(graph, n, method="minmax", pct=99.99, holdout=""):
+    ds, idx = padded_images("train", n, holdout=holdout)
     stats = {}
 
     def obs(name, y):
@@ -212,8 +214,10 @@ def calibrate(graph, n, method="minmax", pct=99.99):
 
 
 @torch.no_grad()
-def eval_val(graph, qparams=None, wq=None, limit=0):
-    ds = camvid.CamVid("val", augment=False, limit=limit or None)
+def eval_val(graph, qparams=None, wq=None, limit=0, holdout=""):
+    items = (camvid.list_sequences(camvid.DEFAULT_ROOT, ["train", "val"], include={holdout})
+             if holdout else None)
+    ds = camvid.CamVid("val", augment=False, limit=limit or None, items=items)
     cm = torch.zeros(NUM_CLASSES, NUM_CLASSES, dtype=torch.int64)
     for i in range(len(ds)):
         x, y = ds[i]
@@ -233,6 +237,9 @@ def main(argv=None):
     p.add_argument("--eval-size", type=export.parse_hw, default=(384, 480))
     p.add_argument("--limit-val", type=int, default=0, help="evaluate on the first N val images only")
     p.add_argument("--no-eval", action="store_true")
+    p.add_argument("--holdout-seq", default="",
+                   help="the checkpoint's held-out CamVid sequence (train.py --holdout-seq): "
+                   "calibrate without it and evaluate on it instead of val")
     p.add_argument("--threads", type=int, default=1)
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
@@ -249,7 +256,7 @@ def main(argv=None):
     if deploy.activation_names() != g.activation_names():
         raise SystemExit("the eval-size graph and --onnx differ in structure/tensor names: "
                          "export --onnx from the same checkpoint/variant")
-    ranges, calib_files = calibrate(g, a.calib, a.method, a.percentile)
+    ranges, calib_files = calibrate(g, a.calib, a.method, a.percentile, a.holdout_seq)
     qparams = {t: act_qparams(*ranges[t]) for t in g.quant_tensors}
     wq, wmeta = quantise_weights(g, qparams)
     side = {
@@ -276,15 +283,17 @@ def main(argv=None):
           f"{len(wmeta)} convs in {time.time() - t0:.0f}s")
     if not a.no_eval:
         t1 = time.time()
-        m32 = eval_val(g, limit=a.limit_val)
-        m8 = eval_val(g, qparams, wq, limit=a.limit_val)
+        m32 = eval_val(g, limit=a.limit_val, holdout=a.holdout_seq)
+        m8 = eval_val(g, qparams, wq, limit=a.limit_val, holdout=a.holdout_seq)
         side["eval"] = {
-            "split": "val", "images": a.limit_val or 101, "size": list(a.eval_size),
+            "split": f"held-out sequence {a.holdout_seq}" if a.holdout_seq else "val",
+            "images": a.limit_val or 101, "size": list(a.eval_size),
+            "int8_dyn_precision": m8["dyn_precision"], "int8_dyn_recall": m8["dyn_recall"],
             "f32": {"miou": m32["miou"], "cat_miou": m32["cat_miou"], "iou": m32["iou"]},
             "int8_sim": {"miou": m8["miou"], "cat_miou": m8["cat_miou"], "iou": m8["iou"]},
             "miou_drop": m32["miou"] - m8["miou"], "cat_miou_drop": m32["cat_miou"] - m8["cat_miou"],
         }
-        print(f"val mIoU f32 {m32['miou'] * 100:.2f} -> int8 {m8['miou'] * 100:.2f} "
+        print(f"{side['eval']['split']} mIoU f32 {m32['miou'] * 100:.2f} -> int8 {m8['miou'] * 100:.2f} "
               f"(drop {(m32['miou'] - m8['miou']) * 100:.2f}); category mIoU f32 {m32['cat_miou'] * 100:.2f} "
               f"-> int8 {m8['cat_miou'] * 100:.2f}  [{time.time() - t1:.0f}s]")
     with open(out_json, "w") as f:

@@ -191,6 +191,22 @@ impl Canvas {
     }
 }
 
+/// Draws `s` in the 8x8 bitmap font with its top-left at `(x, y)` (clipped to the image).
+pub(crate) fn draw_text(img: &mut image::RgbImage, x: u32, y: u32, s: &str, rgb: [u8; 3]) {
+    for (i, ch) in s.chars().enumerate() {
+        for (row, bits) in glyph(ch).iter().enumerate() {
+            for col in 0..8u32 {
+                if bits >> col & 1 == 1 {
+                    let (px, py) = (x + i as u32 * 8 + col, y + row as u32);
+                    if px < img.width() && py < img.height() {
+                        img.put_pixel(px, py, image::Rgb(rgb));
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn text_width(s: &str, scale: u32) -> f64 {
     (s.chars().count() * 8 * scale as usize) as f64
 }

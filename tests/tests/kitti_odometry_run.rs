@@ -58,3 +58,41 @@ fn kitti_01_clip_at_orb_slam2_accuracy() {
 fn kitti_06_clip_at_orb_slam2_accuracy() {
     check_clip("06", 0.030, 0.075);
 }
+
+/// Motion-aware semantics with the committed int8 network and EM against the geometric
+/// backbone on one clip: (backbone ATE, motion + EM ATE), both Sim(3), neither lost.
+fn motion_vs_backbone(seq_id: &str) -> Option<(f64, f64)> {
+    let data = semloc_tests::shared_data()?;
+    let seq = Sequence::open_odometry(&data.join("kitti-odometry"), seq_id, None).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let model =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/artefacts/fastscnn_r2_192x640.slm");
+    let base = run(RunConfig { align: Align::Sim3, ..RunConfig::new(&seq, &dir.path().join("b")) });
+    let motion = run(RunConfig {
+        align: Align::Sim3,
+        semantics: semloc::run::Semantics::Motion,
+        network: Some(semloc::run::Network::File(model)),
+        tracker: semloc_core::tracker::TrackerParams {
+            association: semloc_core::assoc::Association::Em,
+            ..Default::default()
+        },
+        ..RunConfig::new(&seq, &dir.path().join("m"))
+    });
+    assert_eq!((base.summary.lost, motion.summary.lost), (0, 0));
+    let (b, m) = (base.eval.unwrap().ate_rmse_m, motion.eval.unwrap().ate_rmse_m);
+    eprintln!("KITTI {seq_id} clip: Sim(3) ATE backbone {b:.4} m, motion-aware + EM {m:.4} m");
+    Some((b, m))
+}
+
+/// Issue 15: semantics must not make real traffic worse. Table-1 culling with this network
+/// broke the 01 clip (0.76 m against 0.032 m); motion-aware semantics measured 0.0337 m there
+/// and 0.0205 m against 0.0234 m on 06 (2026-11-24). The bound leaves 10 % for the spread of a
+/// 51-frame clip.
+#[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
+fn motion_aware_semantics_keep_real_clips_at_backbone_accuracy() {
+    for seq_id in ["01", "06"] {
+        let Some((b, m)) = motion_vs_backbone(seq_id) else { return };
+        assert!(m <= 1.10 * b, "{seq_id}: motion-aware + EM {m:.4} m vs backbone {b:.4} m");
+    }
+}

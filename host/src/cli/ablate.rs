@@ -79,6 +79,10 @@ struct JsonRow<'a> {
     lost: u32,
     median_culled_per_frame: f64,
     em_changed_total: u64,
+    /// Motion-aware rows: precision and recall of the removed features against the
+    /// sequence's moving-object mask (synthetic sequences), else null.
+    moving_precision: Option<f64>,
+    moving_recall: Option<f64>,
     folder: &'a str,
 }
 
@@ -99,7 +103,7 @@ pub fn table(rows: &[Row]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}",
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}{:>12}",
         "semantics",
         "assoc",
         "ATE [m]",
@@ -111,12 +115,13 @@ pub fn table(rows: &[Row]) -> String {
         "p99 ms",
         "lost",
         "culled",
-        "EM changed"
+        "EM changed",
+        "moving P/R"
     );
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}",
-        "", "", "", "of len", "", "100 m]", "[m / deg]", "median", "", "", "/frame", "total"
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}{:>12}",
+        "", "", "", "of len", "", "100 m]", "[m / deg]", "median", "", "", "/frame", "total", "[%]"
     );
     for r in rows {
         let e = r.outcome.eval.as_ref();
@@ -124,7 +129,7 @@ pub fn table(rows: &[Row]) -> String {
         let compute = r.outcome.summary.timing.get("compute");
         let _ = writeln!(
             s,
-            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9.0}{:>11}",
+            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9.0}{:>11}{:>12}",
             r.semantics.name(),
             association_name(r.assoc),
             f(e.map(|e| e.ate_rmse_m), 3),
@@ -140,9 +145,20 @@ pub fn table(rows: &[Row]) -> String {
             r.outcome.summary.lost,
             r.outcome.summary.median_culled,
             r.outcome.summary.em_changed_total,
+            moving_pr(r).map_or("n/a".to_owned(), |(p, r)| format!(
+                "{:.0} / {:.0}",
+                100.0 * p,
+                100.0 * r
+            )),
         );
     }
     s
+}
+
+/// Precision and recall of a motion-aware row's removed features against the moving mask.
+fn moving_pr(r: &Row) -> Option<(f64, f64)> {
+    let m = r.outcome.summary.motion.as_ref()?;
+    Some((m.moving_precision?, m.moving_recall?))
 }
 
 /// Tracks once per (semantics, assoc) pair, each row configured as `base()` makes it but for
@@ -295,6 +311,13 @@ pub fn run(args: &AblateArgs) -> Result<()> {
                 lost: r.outcome.summary.lost,
                 median_culled_per_frame: r.outcome.summary.median_culled,
                 em_changed_total: r.outcome.summary.em_changed_total,
+                moving_precision: r
+                    .outcome
+                    .summary
+                    .motion
+                    .as_ref()
+                    .and_then(|m| m.moving_precision),
+                moving_recall: r.outcome.summary.motion.as_ref().and_then(|m| m.moving_recall),
                 folder,
             }
         })

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use semloc::dataset::luma::load_luma_file;
-use semloc::nn::segment::{label_image, overlay, to_frame, Segmenter};
+use semloc::nn::segment::{label_image, overlay_with_legend, to_frame, Segmenter};
 use semloc::nn::tract_ref::TractRef;
 use semloc::nn::SlmBlob;
 use semloc::run::percentiles;
@@ -23,7 +23,7 @@ pub struct SegmentArgs {
     /// The int8 model (`semloc convert`).
     #[arg(long, value_name = "X.slm")]
     pub model: PathBuf,
-    /// Output folder (created): `<name>_labels.png` (class ids) and `<name>_overlay.png`.
+    /// Output folder (created): `<name>_labels.png` (class ids) and `<name>_overlay.png` (with a class legend).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Also run the float ONNX in tract: writes `<name>_labels_f32.png` and reports the label
@@ -88,7 +88,7 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
             img(&p).with_context(|| format!("{}: cannot write", p.display()))
         };
         save(&|p| label_image(&labels.frame, w, h).save(p), "labels")?;
-        save(&|p| overlay(&frame, &labels.frame).save(p), "overlay")?;
+        save(&|p| overlay_with_legend(&frame, &labels.frame).save(p), "overlay")?;
         if let Some(tract) = &tract {
             let lb = seg.letterbox(w as usize, h as usize)?;
             let f32_model = seg.reference(tract)?;

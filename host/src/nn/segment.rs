@@ -212,6 +212,43 @@ pub fn overlay(frame: &GrayImage, labels: &[u8]) -> RgbImage {
     })
 }
 
+/// [`overlay`] with a legend band below it: one swatch in the palette colour and the class
+/// name per CamVid class (and void), wrapped to the image width.
+pub fn overlay_with_legend(frame: &GrayImage, labels: &[u8]) -> RgbImage {
+    const ROW: u32 = 14;
+    let names = semloc_core::seg::CLASS_NAMES.iter().copied().chain(core::iter::once("void"));
+    let w = frame.width();
+    // Lay the entries out first to know how many rows the band needs.
+    let mut pos = Vec::new();
+    let (mut x, mut row) = (4u32, 0u32);
+    for (id, name) in names.enumerate() {
+        let width = 14 + 8 * name.len() as u32 + 10;
+        if x + width > w && x > 4 {
+            x = 4;
+            row += 1;
+        }
+        pos.push((id, name, x, row));
+        x += width;
+    }
+    let band = (row + 1) * ROW + 4;
+    let top = overlay(frame, labels);
+    let mut out = RgbImage::from_pixel(w, frame.height() + band, image::Rgb([255, 255, 255]));
+    image::imageops::replace(&mut out, &top, 0, 0);
+    for (id, name, x, row) in pos {
+        let y = frame.height() + 3 + row * ROW;
+        let c = CAMVID_PALETTE[id];
+        for dy in 0..10 {
+            for dx in 0..10 {
+                if x + dx < w {
+                    out.put_pixel(x + dx, y + dy, image::Rgb(c));
+                }
+            }
+        }
+        crate::plot::draw_text(&mut out, x + 14, y + 1, name, [0, 0, 0]);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::convert::convert;
@@ -248,6 +285,19 @@ mod tests {
         }
         let agree = same as f64 / total as f64;
         assert!(agree > 0.97, "int8 vs f32 label agreement {agree}");
+    }
+
+    #[test]
+    fn legend_names_every_class_below_the_overlay() {
+        let frame = GrayImage::from_pixel(300, 20, image::Luma([100]));
+        let labels = vec![8u8; 300 * 20];
+        let img = overlay_with_legend(&frame, &labels);
+        assert_eq!(img.width(), 300);
+        // 12 entries do not fit one 300 px row: the band wraps into several 14 px rows.
+        assert!(img.height() >= 20 + 3 * 14, "height {}", img.height());
+        assert_eq!(img.get_pixel(5, 5), &overlay(&frame, &labels).get_pixel(5, 5).clone());
+        // The first swatch is the sky colour.
+        assert_eq!(img.get_pixel(6, 25).0, CAMVID_PALETTE[0]);
     }
 
     #[test]

@@ -32,7 +32,7 @@ use crate::nn::segment::Segmenter;
 use crate::nn::{NnFileError, SlmBlob};
 use crate::pipeline::{FrameOutput, FrameSource, Pipeline, PipelineError};
 
-pub use outputs::{EvalSummary, Summary, FRAMES_CSV_HEADER};
+pub use outputs::{EvalSummary, MotionSummary, Summary, FRAMES_CSV_HEADER};
 pub use stats::{percentiles, Percentiles};
 
 /// Semantic weighting of left-image features (the paper's §3.1).
