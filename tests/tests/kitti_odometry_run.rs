@@ -67,7 +67,7 @@ fn motion_vs_backbone(seq_id: &str) -> Option<(f64, f64)> {
     let dir = tempfile::tempdir().unwrap();
     let model =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/artefacts/fastscnn_r2_192x640.slm");
-    let base = run(RunConfig { align: Align::Sim3, ..RunConfig::new(&seq, &dir.path().join("b")) });
+    let base = run(RunConfig { align: Align::Sim3, ..RunConfig::new(&seq, dir.path().join("b")) });
     let motion = run(RunConfig {
         align: Align::Sim3,
         semantics: semloc::run::Semantics::Motion,
@@ -76,7 +76,7 @@ fn motion_vs_backbone(seq_id: &str) -> Option<(f64, f64)> {
             association: semloc_core::assoc::Association::Em,
             ..Default::default()
         },
-        ..RunConfig::new(&seq, &dir.path().join("m"))
+        ..RunConfig::new(&seq, dir.path().join("m"))
     });
     assert_eq!((base.summary.lost, motion.summary.lost), (0, 0));
     let (b, m) = (base.eval.unwrap().ate_rmse_m, motion.eval.unwrap().ate_rmse_m);

@@ -635,12 +635,10 @@ impl Tracker {
                         relinked += 1;
                     }
                 }
-                FeatureMotion::Moving => {
-                    if self.matches.lm[i] != NO_LANDMARK {
-                        // Only when nothing was held (too few other matches) was it solved with.
-                        self.matches.unlink(i);
-                        relinked += 1;
-                    }
+                // Linked only when nothing was held (too few other matches): solved with.
+                FeatureMotion::Moving if self.matches.lm[i] != NO_LANDMARK => {
+                    self.matches.unlink(i);
+                    relinked += 1;
                 }
                 _ => {}
             }

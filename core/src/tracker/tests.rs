@@ -255,7 +255,7 @@ fn car(rng: &mut Rng, c: Vector3<f64>, n: usize) -> StdVec<Point> {
         .map(|_| {
             let (u, v) = (rng.unit() - 0.5, rng.unit());
             // Side facing the road centre (x = c.x ∓ 0.9) and the back (z = c.z - 2.15).
-            let p = if rng.next_u64() % 2 == 0 {
+            let p = if rng.next_u64().is_multiple_of(2) {
                 let sx = if c.x > 0.0 { -0.9 } else { 0.9 };
                 Vector3::new(c.x + sx, c.y - v * 1.4, c.z + u * 4.3)
             } else {
