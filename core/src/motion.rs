@@ -415,17 +415,25 @@ mod tests {
             feats.push(feat(1000.0 + 10.0 * k as f32, 100.0, 12.0, 9)); // unmatched pedestrian
         }
         let mut lo = [0.0f32; 16];
-        s.reset(feats.len());
-        for i in 0..10 {
-            s.cand[i] = i as u32;
-            s.gate[i] = 7.8;
-            s.chi2[i] = if i < 5 { 1.0 } else { 60.0 };
-        }
-        let rep = s.decide(&feats, &crate::testing::kitti_cam(), &p, |id, e| {
-            let l = &mut lo[id as usize];
-            *l = (*l + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
-            *l
-        });
+        let mut frame = |s: &mut MotionScratch, lo: &mut [f32; 16]| {
+            s.reset(feats.len());
+            for i in 0..10 {
+                s.cand[i] = i as u32;
+                s.gate[i] = 7.8;
+                s.chi2[i] = if i < 5 { 1.0 } else { 60.0 };
+            }
+            s.decide(&feats, &crate::testing::kitti_cam(), &p, |id, e| {
+                let l = &mut lo[id as usize];
+                *l = (*l + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
+                *l
+            })
+        };
+        // One frame of consistent matches is not yet enough to call a car parked; one frame
+        // of inconsistent ones calls the other moving.
+        let rep = frame(&mut s, &mut lo);
+        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (0, 5, 8));
+        assert!(lo[..5].iter().all(|&l| (l + p.max_frame_llr).abs() < 1e-6));
+        let rep = frame(&mut s, &mut lo);
         assert_eq!(rep.segments, 3);
         assert_eq!(rep.parked_segments, 1);
         assert_eq!(rep.moving_segments, 1);
@@ -435,9 +443,9 @@ mod tests {
         assert!(s.state[10..13].iter().all(|&m| m == FeatureMotion::Unproven));
         assert!(s.blocked[5..10].iter().all(|&b| b));
         assert!(!s.blocked[..5].iter().any(|&b| b) && !s.blocked[10..13].iter().any(|&b| b));
-        // Clamped frame evidence went to each landmark.
-        assert!(lo[..5].iter().all(|&l| (l + p.max_frame_llr).abs() < 1e-6));
-        assert!(lo[5..10].iter().all(|&l| (l - p.max_frame_llr).abs() < 1e-6));
+        // Clamped frame evidence went to each landmark, twice.
+        assert!(lo[..5].iter().all(|&l| (l + 2.0 * p.max_frame_llr).abs() < 1e-6));
+        assert!(lo[5..10].iter().all(|&l| (l - 2.0 * p.max_frame_llr).abs() < 1e-6));
         assert_eq!(s.cand[12], NO_LANDMARK);
     }
 
