@@ -415,7 +415,7 @@ mod tests {
             feats.push(feat(1000.0 + 10.0 * k as f32, 100.0, 12.0, 9)); // unmatched pedestrian
         }
         let mut lo = [0.0f32; 16];
-        let mut frame = |s: &mut MotionScratch, lo: &mut [f32; 16]| {
+        let frame = |s: &mut MotionScratch, lo: &mut [f32; 16]| {
             s.reset(feats.len());
             for i in 0..10 {
                 s.cand[i] = i as u32;
