@@ -262,6 +262,16 @@ impl MotionScratch {
         segments
     }
 
+    /// Whether feature `i` has a match measured at the solved pose.
+    fn measured(&self, i: usize) -> bool {
+        self.cand[i] != crate::map::NO_LANDMARK && self.chi2[i] >= 0.0
+    }
+
+    /// Whether feature `i`'s match was measured and passed its χ² gate.
+    pub fn consistent(&self, i: usize) -> bool {
+        self.measured(i) && self.chi2[i] <= self.gate[i]
+    }
+
     /// The segment (root feature index) of dynamic feature `i` after [`Self::segment`].
     #[cfg(test)]
     pub fn root(&mut self, i: usize) -> usize {
@@ -295,11 +305,11 @@ impl MotionScratch {
         // Evidence of this frame, per segment.
         for k in 0..n {
             let i = usize::from(self.dyn_idx[k]);
-            if self.cand[i] == crate::map::NO_LANDMARK || self.chi2[i] < 0.0 {
+            if !self.measured(i) {
                 continue;
             }
             let r = self.find(i);
-            if self.chi2[i] <= self.gate[i] {
+            if self.consistent(i) {
                 self.n_ok[r] = self.n_ok[r].saturating_add(1);
                 self.ev[r] += LLR_CONSISTENT;
             } else {
@@ -311,10 +321,10 @@ impl MotionScratch {
         for k in 0..n {
             let i = usize::from(self.dyn_idx[k]);
             let r = self.find(i);
-            let id = self.cand[i];
-            if id == crate::map::NO_LANDMARK || self.chi2[i] < 0.0 {
+            if !self.measured(i) {
                 continue;
             }
+            let id = self.cand[i];
             let e = self.ev[r].clamp(-params.max_frame_llr, params.max_frame_llr);
             self.lo_sum[r] += update(id, e);
             self.n_lm[r] = self.n_lm[r].saturating_add(1);

@@ -565,9 +565,6 @@ impl Tracker {
             }
             let lo = window.lm(id).moving_lo;
             let dynamic = is_dynamic(f.class);
-            if dynamic {
-                m.cand[i] = id;
-            }
             // Static-class features leave a landmark only on strong evidence (p > 0.88 without
             // a prior): labels flicker at object borders.
             let hold = if dynamic {
@@ -575,8 +572,11 @@ impl Tracker {
             } else {
                 lo > MOVING_LOGIT + 2.0
             };
-            if hold {
+            // Every dynamic-class match is measured after the solve, held or not.
+            if dynamic || hold {
                 m.cand[i] = id;
+            }
+            if hold {
                 m.held[i] = true;
                 held += 1;
             } else {
@@ -626,14 +626,10 @@ impl Tracker {
         let mut relinked = 0;
         for i in 0..feats.len() {
             match self.motion.state[i] {
-                FeatureMotion::Parked => {
-                    let ok =
-                        self.motion.chi2[i] >= 0.0 && self.motion.chi2[i] <= self.motion.gate[i];
-                    if self.motion.held[i] && ok {
-                        self.matches.lm[i] = self.motion.cand[i];
-                        self.matches.weight[i] = 1.0;
-                        relinked += 1;
-                    }
+                FeatureMotion::Parked if self.motion.held[i] && self.motion.consistent(i) => {
+                    self.matches.lm[i] = self.motion.cand[i];
+                    self.matches.weight[i] = 1.0;
+                    relinked += 1;
                 }
                 // Linked only when nothing was held (too few other matches): solved with.
                 FeatureMotion::Moving if self.matches.lm[i] != NO_LANDMARK => {

@@ -138,7 +138,8 @@ pub(super) fn summarise(
         association: association_name(inputs.association),
         em_changed_total: frames.iter().map(|r| u64::from(r.output.report.em_changed)).sum(),
         median_culled: counter(|r| f64::from(r.output.culled)),
-        motion: (inputs.semantics == "motion").then(|| motion_summary(frames, &inputs.stats)),
+        motion: (inputs.semantics == super::Semantics::Motion.name())
+            .then(|| motion_summary(frames, &inputs.stats)),
         timing: stage_percentiles(frames, inputs.segment_timed),
         eval: eval.map(EvalSummary::from),
     }
