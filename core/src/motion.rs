@@ -47,6 +47,7 @@ use crate::seg::{category, is_dynamic, Category};
 
 /// Settings of the motion test.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct MotionParams {
     /// Prior probability that a vehicle (car, van, truck) is moving.
     pub prior_vehicle: f32,

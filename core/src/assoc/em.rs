@@ -40,6 +40,7 @@ use crate::semdesc::{self, SemDesc};
 
 /// Parameters of the E-step.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct EmParams {
     /// EM iterations (E + M) per frame.
     pub iterations: u8,

@@ -42,6 +42,8 @@ pub const MAX_CANDIDATES: usize = 4;
 /// How features are associated with landmarks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 pub enum Association {
     /// Nearest neighbour in descriptor space within the projection gate (ORB-SLAM2).
     Hard,

@@ -40,6 +40,7 @@ use crate::seg::is_dynamic;
 
 /// Tracker settings; defaults follow ORB-SLAM2's stereo KITTI configuration where it has one.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct TrackerParams {
     /// Stereo points closer than this many baselines are "close" (ORB-SLAM2 `ThDepth` 35).
     pub close_depth_baselines: f64,
@@ -120,6 +121,45 @@ pub enum TrackState {
     Tracking,
 }
 
+/// How a frame's pose was obtained: what a user must know before trusting it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FrameStatus {
+    /// The first map was started on this frame (its pose is the origin, or the prediction).
+    Initialised,
+    /// Tracked against the map: the pose is measured.
+    Tracked,
+    /// Tracking failed on this frame and no new map could be started: the pose is extrapolated
+    /// with the constant-velocity model.
+    Lost,
+    /// No map (still lost after a loss, or not yet initialised): the pose is extrapolated, not
+    /// measured.
+    Coasted,
+    /// A new map was started on this frame after tracking had been lost: the pose is the
+    /// extrapolated one, and poses after it are relative to it.
+    Reinitialised,
+}
+
+impl FrameStatus {
+    /// The name written to `frames.csv`: `initialised`, `tracked`, `lost`, `coasted`,
+    /// `reinitialised`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Initialised => "initialised",
+            Self::Tracked => "tracked",
+            Self::Lost => "lost",
+            Self::Coasted => "coasted",
+            Self::Reinitialised => "reinitialised",
+        }
+    }
+
+    /// Whether the pose was measured on this frame (tracked, or the first map's origin), as
+    /// opposed to extrapolated.
+    pub fn measured(self) -> bool {
+        matches!(self, Self::Initialised | Self::Tracked)
+    }
+}
+
 /// What happened on one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameReport {
@@ -129,6 +169,8 @@ pub struct FrameReport {
     pub t_wc: Se3,
     /// State after the frame.
     pub state: TrackState,
+    /// How the pose was obtained (measured or extrapolated).
+    pub status: FrameStatus,
     /// Features with stereo depth in the input.
     pub stereo_features: u32,
     /// Landmark matches found by the projection search (final pass).
@@ -164,6 +206,12 @@ pub struct TrackerStats {
     pub keyframes: u32,
     /// Times tracking was lost (each followed by re-initialisation).
     pub lost: u32,
+    /// Frames whose pose was extrapolated rather than measured: [`FrameStatus::Lost`],
+    /// [`FrameStatus::Coasted`] and [`FrameStatus::Reinitialised`] (six black frames in a row
+    /// are one loss but six untracked frames).
+    pub untracked_frames: u32,
+    /// Maps started (the first one included).
+    pub initialisations: u32,
     /// Landmark creations refused because the store was full.
     pub landmark_overflow: u32,
     /// Keyframes evicted (least recently used) because the store was full.
@@ -369,6 +417,7 @@ impl Tracker {
             frame_index: index,
             t_wc: self.t_cw.inverse(),
             state: self.state,
+            status: FrameStatus::Tracked,
             stereo_features: frame.stereo_count() as u32,
             matched: 0,
             inliers: 0,
@@ -389,8 +438,16 @@ impl Tracker {
         // frame, which from rounding alone reaches centimetres within 30 frames.
         let predicted =
             if self.has_velocity { renormalize(&self.velocity.compose(&last)) } else { last };
+        let had_map = self.stats.initialisations > 0;
         match self.state {
-            TrackState::Uninitialised => self.initialise(frame, index, predicted, &mut rep),
+            TrackState::Uninitialised => {
+                self.initialise(frame, index, predicted, &mut rep);
+                rep.status = match (rep.initialised, had_map) {
+                    (true, false) => FrameStatus::Initialised,
+                    (true, true) => FrameStatus::Reinitialised,
+                    (false, _) => FrameStatus::Coasted,
+                };
+            }
             TrackState::Tracking => {
                 if self.track(frame, predicted, &mut rep) {
                     self.velocity = renormalize(&self.t_cw.compose(&last.inverse()));
@@ -404,8 +461,19 @@ impl Tracker {
                     rep.lost = true;
                     self.stats.lost += 1;
                     self.initialise(frame, index, predicted, &mut rep);
+                    rep.status = if rep.initialised {
+                        FrameStatus::Reinitialised
+                    } else {
+                        FrameStatus::Lost
+                    };
                 }
             }
+        }
+        if rep.initialised {
+            self.stats.initialisations += 1;
+        }
+        if !rep.status.measured() {
+            self.stats.untracked_frames += 1;
         }
         rep.t_wc = self.t_cw.inverse();
         rep.state = self.state;
