@@ -612,6 +612,27 @@ pub fn rpe(gt: &[Se3], est: &[Se3], delta: RpeDelta) -> Result<Option<Rpe>, Eval
     }))
 }
 
+/// Above this rotation (degrees) an alignment is suspicious and the evaluation warns: a
+/// tracker's estimate and the ground truth both start at the first camera pose, so a good
+/// estimate needs a few degrees at most; frames fed in reverse order, or a wrong world frame,
+/// score a good ATE only through a large turn (about 180° for reversed frames).
+pub const ALIGNMENT_WARN_DEG: f64 = 15.0;
+
+/// The angle (degrees) by which `rot` turns the direction from `est`'s first to its last
+/// position; the whole rotation's angle when that displacement is under 1 mm.
+fn heading_turn_deg(est: &[Se3], rot: &Matrix3<f64>) -> f64 {
+    let d = match (est.first(), est.last()) {
+        (Some(a), Some(b)) => b.trans - a.trans,
+        _ => Vector3::zeros(),
+    };
+    let n = d.norm();
+    if n < 1e-3 {
+        return rotation_angle(rot).to_degrees();
+    }
+    let u = d / n;
+    (rot * u).dot(&u).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
 /// Everything `semloc eval` reports about one estimated trajectory.
 ///
 /// Serialises to JSON with the summary, the per-length table, the ATE alignment and every
@@ -641,6 +662,16 @@ pub struct EvalReport {
     pub ate_max_m: f64,
     /// The alignment that maps the estimate onto the ground truth.
     pub alignment: Sim3,
+    /// The rotation angle of `alignment` (degrees). On a straight path the turn about the
+    /// direction of travel is undetermined, so this can be large for a good estimate.
+    pub alignment_rotation_deg: f64,
+    /// How far `alignment` turns the estimate's direction of travel (first to last position;
+    /// degrees; the full rotation when the estimate does not move): the figure the warning
+    /// looks at, since it is determined even on a straight path.
+    pub alignment_heading_deg: f64,
+    /// What makes this evaluation suspect (e.g. an alignment rotation above
+    /// [`ALIGNMENT_WARN_DEG`]); empty when nothing does.
+    pub warnings: Vec<String>,
     /// Devkit errors per segment length.
     pub per_length: Vec<LengthStats>,
     /// Every devkit segment.
@@ -669,6 +700,18 @@ pub fn evaluate(gt: &[Se3], est: &[Se3], align: Align) -> Result<EvalReport, Eva
     let rpe_10m = rpe(gt, est, RPE_10_M)?;
     let gt_distances_m = trajectory_distances(gt);
     let means = kitti_means(&segments);
+    let alignment_rotation_deg = rotation_angle(&a.alignment.rot).to_degrees();
+    let alignment_heading_deg = heading_turn_deg(est, &a.alignment.rot);
+    let mut warnings = Vec::new();
+    if alignment_heading_deg > ALIGNMENT_WARN_DEG {
+        warnings.push(format!(
+            "the {align} alignment turns the estimate's direction of travel by \
+             {alignment_heading_deg:.1}° to fit the ground truth (more than \
+             {ALIGNMENT_WARN_DEG}°): the ATE is only this good after that turn. Frames in \
+             reverse order, another sequence's ground truth or another world frame would do \
+             this; check before trusting the ATE"
+        ));
+    }
     Ok(EvalReport {
         n_poses: gt.len(),
         path_length_m: gt_distances_m.last().copied().unwrap_or(0.0),
@@ -681,6 +724,9 @@ pub fn evaluate(gt: &[Se3], est: &[Se3], align: Align) -> Result<EvalReport, Eva
         ate_median_m: a.median_m,
         ate_max_m: a.max_m,
         alignment: a.alignment,
+        alignment_rotation_deg,
+        alignment_heading_deg,
+        warnings,
         per_length: per_length(&segments),
         segments,
         rpe_1f,
@@ -725,6 +771,13 @@ impl fmt::Display for EvalReport {
         )?;
         if self.align == Align::Sim3 {
             writeln!(f, "scale          {:.4}", self.alignment.scale)?;
+        }
+        if self.align != Align::None {
+            writeln!(
+                f,
+                "alignment      rotation {:.2} deg, turns the direction of travel {:.2} deg",
+                self.alignment_rotation_deg, self.alignment_heading_deg
+            )?;
         }
         writeln!(f)?;
         writeln!(

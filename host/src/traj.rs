@@ -86,6 +86,38 @@ pub enum TrajError {
         /// Fields on that line.
         found: usize,
     },
+    /// A KITTI line's 3x3 block is not a rotation (not orthonormal, or a reflection).
+    #[error(
+        "{}:{line}: the 3x3 part is not a rotation matrix (|RᵀR − I| = {deviation:.2e}, det \
+         {det:.4}); poses must be rigid camera-to-world transforms",
+        path.display()
+    )]
+    NotRotation {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// Largest entry of |RᵀR − I|.
+        deviation: f64,
+        /// Determinant of R.
+        det: f64,
+    },
+    /// A TUM timestamp is not after the one before it.
+    #[error(
+        "{}:{line}: timestamp {time} is not after the previous one ({previous}); TUM times \
+         must increase strictly",
+        path.display()
+    )]
+    TimeNotIncreasing {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// The timestamp.
+        time: f64,
+        /// The previous line's.
+        previous: f64,
+    },
     /// The file holds no poses.
     #[error("{}: no poses in file", path.display())]
     Empty {
@@ -192,12 +224,32 @@ pub fn detect_format(path: impl AsRef<Path>) -> Result<TrajFormat, TrajError> {
     detect_format_of(&read_text(path)?, path)
 }
 
-/// Pairs poses of two timestamped trajectories the way evo's `associate_trajectories` does:
-/// every stamp of the shorter list is matched to the nearest stamp of the longer one (the first
-/// such on ties) and kept when they differ by at most `max_dt` seconds. Returns
-/// `(index into gt, index into est)` pairs in the order of the shorter list; an index of the
-/// longer list may appear more than once, as in evo.
+/// Pairs poses of two timestamped trajectories one to one: every stamp of the shorter list is
+/// matched to the nearest stamp of the longer one (the first such on ties), as evo's
+/// `associate_trajectories` does, and kept when they differ by at most `max_dt` seconds; when
+/// two stamps pick the same partner only the closer pair is kept (evo would use that pose
+/// twice and weight it double in the ATE). Returns `(index into gt, index into est)` pairs in
+/// the order of the shorter list.
 pub fn associate_by_time(gt: &[f64], est: &[f64], max_dt: f64) -> Vec<(usize, usize)> {
+    let pairs = nearest_pairs(gt, est, max_dt);
+    let est_longer = est.len() > gt.len();
+    let partner = |p: &(usize, usize)| if est_longer { p.1 } else { p.0 };
+    let gap = |p: &(usize, usize)| (gt[p.0] - est[p.1]).abs();
+    let mut best: std::collections::HashMap<usize, (usize, usize)> = Default::default();
+    for p in &pairs {
+        best.entry(partner(p))
+            .and_modify(|b| {
+                if gap(p) < gap(b) {
+                    *b = *p;
+                }
+            })
+            .or_insert(*p);
+    }
+    pairs.into_iter().filter(|p| best.get(&partner(p)) == Some(p)).collect()
+}
+
+/// evo's nearest-stamp matching (see [`associate_by_time`]), which may use a pose twice.
+fn nearest_pairs(gt: &[f64], est: &[f64], max_dt: f64) -> Vec<(usize, usize)> {
     let est_longer = est.len() > gt.len();
     let (short, long) = if est_longer { (gt, est) } else { (est, gt) };
     let sorted = long.windows(2).all(|w| w[0] <= w[1]);
@@ -227,10 +279,31 @@ pub fn associate_by_time(gt: &[f64], est: &[f64], max_dt: f64) -> Vec<(usize, us
         .collect()
 }
 
-/// Parses KITTI pose text; `path` is only used in error messages.
+/// How far from orthonormal a stored rotation may be (largest entry of |RᵀR − I|): files
+/// keep 6 to 9 digits, which leaves ~1e-7; anything near this is not a rotation.
+pub const ROTATION_TOLERANCE: f64 = 1e-3;
+
+/// Parses KITTI pose text; `path` is only used in error messages. `#` starts a comment. A
+/// 3x3 block that is not a rotation ([`ROTATION_TOLERANCE`], or a reflection) is an error.
 pub fn parse_kitti(text: &str, path: &Path) -> Result<Vec<Se3>, TrajError> {
-    let rows = parse_lines(text, path, 12, false)?;
-    Ok(rows.into_iter().map(|(_, n)| Se3::from_matrix3x4(&Matrix3x4::from_row_slice(&n))).collect())
+    let rows = parse_lines(text, path, 12, true)?;
+    rows.into_iter()
+        .map(|(line, n)| {
+            let pose = Se3::from_matrix3x4(&Matrix3x4::from_row_slice(&n));
+            let gram = pose.rot.transpose() * pose.rot - Matrix3::identity();
+            let deviation = gram.amax();
+            let det = pose.rot.determinant();
+            if deviation > ROTATION_TOLERANCE || det <= 0.0 {
+                return Err(TrajError::NotRotation {
+                    path: path.to_path_buf(),
+                    line,
+                    deviation,
+                    det,
+                });
+            }
+            Ok(pose)
+        })
+        .collect()
 }
 
 /// Reads a KITTI pose file (12 numbers a line, 3x4 row-major camera-to-world).
@@ -242,6 +315,16 @@ pub fn read_kitti(path: impl AsRef<Path>) -> Result<Vec<Se3>, TrajError> {
 /// Parses TUM trajectory text; `path` is only used in error messages.
 pub fn parse_tum(text: &str, path: &Path) -> Result<Vec<(f64, Se3)>, TrajError> {
     let rows = parse_lines(text, path, 8, true)?;
+    for w in rows.windows(2) {
+        if w[1].1[0] <= w[0].1[0] {
+            return Err(TrajError::TimeNotIncreasing {
+                path: path.to_path_buf(),
+                line: w[1].0,
+                time: w[1].1[0],
+                previous: w[0].1[0],
+            });
+        }
+    }
     rows.into_iter()
         .map(|(line, n)| {
             // nalgebra's Quaternion::new takes (w, i, j, k).
@@ -301,20 +384,30 @@ fn rot_to_quat(rot: &Matrix3<f64>) -> UnitQuaternion<f64> {
     UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*rot))
 }
 
+/// The `#` header line of TUM files semloc writes.
+pub const TUM_HEADER: &str = "# timestamp tx ty tz qx qy qz qw\n";
+
 /// Formats timestamped poses as TUM text, with a `#` header line.
 pub fn format_tum(poses: &[(f64, Se3)]) -> String {
-    let mut out = String::from("# timestamp tx ty tz qx qy qz qw\n");
+    let mut out = String::from(TUM_HEADER);
     for (t, p) in poses {
-        let q = rot_to_quat(&p.rot);
-        let nums = [*t, p.trans.x, p.trans.y, p.trans.z, q.i, q.j, q.k, q.w];
-        for (i, v) in nums.iter().enumerate() {
-            if i > 0 {
-                out.push(' ');
-            }
-            push_num(&mut out, *v);
-        }
-        out.push('\n');
+        out.push_str(&format_tum_line(*t, p));
     }
+    out
+}
+
+/// One TUM line (`timestamp tx ty tz qx qy qz qw` and a newline).
+pub fn format_tum_line(t: f64, p: &Se3) -> String {
+    let mut out = String::with_capacity(8 * 24);
+    let q = rot_to_quat(&p.rot);
+    let nums = [t, p.trans.x, p.trans.y, p.trans.z, q.i, q.j, q.k, q.w];
+    for (i, v) in nums.iter().enumerate() {
+        if i > 0 {
+            out.push(' ');
+        }
+        push_num(&mut out, *v);
+    }
+    out.push('\n');
     out
 }
 
@@ -356,8 +449,13 @@ mod tests {
                 (0.0f64..1e9, -3.2f64..3.2, -3.2f64..3.2, -3.2f64..3.2, -1e4f64..1e4),
                 1..20)
         ) {
+            // Strictly increasing times, as the reader requires: a running sum of the draws.
+            let mut clock = 0.0;
             let poses: Vec<(f64, Se3)> = vals.iter()
-                .map(|&(t, a, b, c, x)| (t, Se3::new(rot_from(a, b, c), Vector3::new(x, -x, 0.5 * x))))
+                .map(|&(t, a, b, c, x)| {
+                    clock += 1e-3 + t;
+                    (clock, Se3::new(rot_from(a, b, c), Vector3::new(x, -x, 0.5 * x)))
+                })
                 .collect();
             let back = parse_tum(&format_tum(&poses), p()).unwrap();
             prop_assert_eq!(back.len(), poses.len());

@@ -133,8 +133,18 @@ pub(crate) fn stereo_from_projections(
         )));
     }
     let baseline_m = -(right[3] - left[3]) / fx;
-    if baseline_m <= 0.0 {
-        return Err(bad(format!("baseline must be positive, got {baseline_m} m")));
+    if baseline_m == 0.0 {
+        return Err(bad(
+            "baseline is zero: the right projection matrix has the same translation as the \
+             left one (the same camera twice?)"
+                .to_string(),
+        ));
+    }
+    if baseline_m < 0.0 {
+        return Err(bad(format!(
+            "baseline must be positive, got {baseline_m} m: the right camera is to the left \
+             (left and right swapped?)"
+        )));
     }
     Ok(StereoCalib { fx_px: fx, fy_px: fy, cx_px: cx, cy_px: cy, baseline_m })
 }

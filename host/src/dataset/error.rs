@@ -81,6 +81,51 @@ pub enum DatasetError {
         /// Images found.
         images: usize,
     },
+    /// The timestamps do not increase strictly.
+    #[error(
+        "{}: the time of frame {frame} ({time_s} s) is not after frame {}'s ({previous_s} s); \
+         timestamps must increase strictly",
+        path.display(),
+        frame - 1
+    )]
+    TimesNotIncreasing {
+        /// The timestamp file.
+        path: PathBuf,
+        /// The 0-based frame whose time is not after its predecessor's.
+        frame: usize,
+        /// Its time (s).
+        time_s: f64,
+        /// The predecessor's time (s).
+        previous_s: f64,
+    },
+    /// A numbered frame file is missing (a dropped frame).
+    #[error(
+        "{}: frame file {missing} is missing (frame {frame}; the next file is {})",
+        dir.display(),
+        next.as_deref().unwrap_or("none")
+    )]
+    MissingFrame {
+        /// The image folder.
+        dir: PathBuf,
+        /// The file name expected (e.g. `000005.png`).
+        missing: String,
+        /// The 0-based frame index it would have had.
+        frame: usize,
+        /// The file found in its place.
+        next: Option<String>,
+    },
+    /// The left and right image of a frame have different names.
+    #[error(
+        "left image {} is paired with right image {}: the names must match",
+        left.display(),
+        right.display()
+    )]
+    FrameNameMismatch {
+        /// The left image.
+        left: PathBuf,
+        /// The right image at the same position.
+        right: PathBuf,
+    },
     /// The pose file does not have one pose per image.
     #[error("{}: {poses} poses for {images} images", path.display())]
     PoseCountMismatch {
@@ -163,6 +208,23 @@ pub enum DatasetError {
         path: PathBuf,
         /// What was found, or what would disambiguate.
         msg: String,
+    },
+    /// The folder is one sequence or drive, and a different one was asked for.
+    #[error(
+        "{}: this is {what} {found}, but {what} {asked} was asked for; give the dataset root \
+         with --{} {asked}, or this folder without it",
+        path.display(),
+        if *what == "drive" { "drive" } else { "seq" }
+    )]
+    SelectionConflict {
+        /// The folder given.
+        path: PathBuf,
+        /// `sequence` or `drive`.
+        what: &'static str,
+        /// What was asked for.
+        asked: String,
+        /// What the folder is.
+        found: String,
     },
     /// A frame index past the end of the sequence was asked for.
     #[error("{}: frame {index} asked for, the sequence has {frames}", path.display())]

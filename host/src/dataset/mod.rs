@@ -112,7 +112,14 @@ pub struct Sequence {
     /// Camera-to-world poses of the left camera of the pair, one per frame, if the dataset has
     /// ground truth. Odometry grey: `poses/XX.txt` as is; odometry colour: the same trajectory
     /// moved to camera 2 (`T₂ G T₂⁻¹`); raw: from OXTS, first pose identity.
+    ///
+    /// When the ground-truth file is shorter than the sequence or has a bad line, this holds the
+    /// poses before the problem (possibly none) and [`Sequence::gt_problem`] says what it was:
+    /// a run that stays inside them is still evaluated, a longer one skips the evaluation with
+    /// a warning instead of failing.
     pub gt: Option<Vec<Se3>>,
+    /// Why the ground truth does not cover every frame, if it does not.
+    pub gt_problem: Option<DatasetError>,
     /// Image size (width, height) in pixels, the same for every image.
     pub image_size: (u32, u32),
 }
@@ -140,6 +147,11 @@ pub struct DatasetSummary {
     pub calib: StereoCalib,
     /// Whether ground-truth poses are available.
     pub has_gt: bool,
+    /// Frames the ground truth covers (from the first); fewer than `frames` when its file is
+    /// short or has a bad line.
+    pub gt_frames: usize,
+    /// Why the ground truth does not cover every frame, if it does not.
+    pub gt_problem: Option<String>,
     /// Time from the first to the last frame, seconds.
     pub duration_s: f64,
     /// Length of the ground-truth path (sum of distances between consecutive positions),
@@ -175,9 +187,20 @@ impl core::fmt::Display for DatasetSummary {
         )?;
         writeln!(f, "  duration:   {:.3} s", self.duration_s)?;
         match self.gt_length_m {
-            Some(l) => write!(f, "  ground truth: yes, path length {l:.2} m"),
-            None => write!(f, "  ground truth: no"),
+            Some(l) if self.gt_frames == self.frames => {
+                write!(f, "  ground truth: yes, path length {l:.2} m")?
+            }
+            Some(l) => write!(
+                f,
+                "  ground truth: frames 0..{} only, path length {l:.2} m",
+                self.gt_frames
+            )?,
+            None => write!(f, "  ground truth: no")?,
         }
+        if let Some(p) = &self.gt_problem {
+            write!(f, "\n  ground-truth problem: {p}")?;
+        }
+        Ok(())
     }
 }
 
@@ -393,6 +416,8 @@ impl Sequence {
             height_px: self.image_size.1,
             calib: self.calib,
             has_gt: self.gt.is_some(),
+            gt_frames: self.gt.as_ref().map_or(0, Vec::len),
+            gt_problem: self.gt_problem.as_ref().map(ToString::to_string),
             duration_s: self.duration_s(),
             gt_length_m: self.gt_length_m(),
         }
@@ -440,6 +465,8 @@ fn list_pair(
     if left.is_empty() && right.is_empty() {
         return Err(DatasetError::EmptySequence { path: left_dir.to_path_buf() });
     }
+    check_numbering(left_dir, &left)?;
+    check_numbering(right_dir, &right)?;
     if left.len() != right.len() {
         return Err(DatasetError::ImageCountMismatch {
             left_dir: left_dir.to_path_buf(),
@@ -447,6 +474,9 @@ fn list_pair(
             left: left.len(),
             right: right.len(),
         });
+    }
+    if let Some((l, r)) = left.iter().zip(&right).find(|(l, r)| l.file_name() != r.file_name()) {
+        return Err(DatasetError::FrameNameMismatch { left: l.clone(), right: r.clone() });
     }
     Ok((left, right))
 }
@@ -468,7 +498,9 @@ fn first_pair_size(left: &[PathBuf], right: &[PathBuf]) -> Result<(u32, u32), Da
     Ok(size)
 }
 
-/// Times of the first `images` frames from a list; shorter lists are an error.
+/// Times of the first `images` frames from a list; shorter lists, and times that do not
+/// increase strictly (a duplicate or a step back would reach the TUM output and break every
+/// time association downstream), are errors.
 fn check_times(path: &Path, mut times: Vec<f64>, images: usize) -> Result<Vec<f64>, DatasetError> {
     if times.len() < images {
         return Err(DatasetError::TimesTooShort {
@@ -479,5 +511,40 @@ fn check_times(path: &Path, mut times: Vec<f64>, images: usize) -> Result<Vec<f6
     }
     // Extra entries (e.g. a timestamps file of a longer drive) belong to frames not present.
     times.truncate(images);
+    if let Some(k) = times.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(DatasetError::TimesNotIncreasing {
+            path: path.to_path_buf(),
+            frame: k + 1,
+            time_s: times[k + 1],
+            previous_s: times[k],
+        });
+    }
     Ok(times)
+}
+
+/// The frame number a file name stands for (`000042.png` → 42), if its stem is all digits.
+fn frame_number(path: &Path) -> Option<u64> {
+    let stem = path.file_stem()?.to_str()?;
+    (!stem.is_empty() && stem.bytes().all(|b| b.is_ascii_digit())).then(|| stem.parse().ok())?
+}
+
+/// Checks that numbered frame files (`000000.png`, `000001.png`, ...) have no gap: a dropped
+/// file would otherwise shift every later frame against its timestamp and ground truth.
+fn check_numbering(dir: &Path, files: &[PathBuf]) -> Result<(), DatasetError> {
+    let Some(numbers) = files.iter().map(|f| frame_number(f)).collect::<Option<Vec<u64>>>() else {
+        return Ok(()); // not numbered: nothing to check
+    };
+    for (k, w) in numbers.windows(2).enumerate() {
+        if w[1] != w[0] + 1 {
+            let width = files[k].file_stem().map_or(6, |s| s.len());
+            let ext = files[k].extension().map(|e| e.to_string_lossy().into_owned());
+            return Err(DatasetError::MissingFrame {
+                dir: dir.to_path_buf(),
+                missing: format!("{:0width$}.{}", w[0] + 1, ext.unwrap_or_default()),
+                frame: k + 1,
+                next: files[k + 1].file_name().map(|n| n.to_string_lossy().into_owned()),
+            });
+        }
+    }
+    Ok(())
 }

@@ -9,7 +9,7 @@ use nalgebra::{Matrix3x4, Vector3};
 use semloc_core::geom::Se3;
 
 use super::calib::{stereo_from_projections, CalibFile};
-use super::text::read_rows;
+use super::text::{read_rows, read_rows_prefix};
 use super::{check_times, first_pair_size, list_pair, CameraPair, DatasetError, Layout, Sequence};
 
 /// Finds the sequence folder and the pose file for `seq` under `root`.
@@ -27,8 +27,17 @@ fn locate(root: &Path, seq: &str) -> Result<(PathBuf, String, PathBuf), DatasetE
     let looks_like_sequence =
         ["calib.txt", "times.txt", "image_0", "image_2"].iter().any(|f| root.join(f).exists());
     if looks_like_sequence || (root.is_dir() && !root.join("sequences").is_dir()) {
-        // Handed the sequence folder itself: poses live at ../../poses/XX.txt.
+        // Handed the sequence folder itself: poses live at ../../poses/XX.txt. It must be the
+        // sequence asked for (`--seq 06` on `sequences/01` is a mistake, not a request).
         let name = super::dir_name(root);
+        if !name.is_empty() && name != seq && name != padded {
+            return Err(DatasetError::SelectionConflict {
+                path: root.to_path_buf(),
+                what: "sequence",
+                asked: seq.to_string(),
+                found: name,
+            });
+        }
         let name = if name.is_empty() { padded } else { name };
         let poses = root.join("..").join("..").join("poses").join(format!("{name}.txt"));
         return Ok((root.to_path_buf(), name, poses));
@@ -66,14 +75,21 @@ pub(crate) fn open(
     let times: Vec<f64> = read_rows(&times_path, 1)?.into_iter().map(|r| r[0]).collect();
     let times_s = check_times(&times_path, times, left.len())?;
 
+    let mut gt_problem = None;
     let gt = if poses_path.is_file() {
-        let rows = read_rows(&poses_path, 12)?;
-        if rows.len() != left.len() {
-            return Err(DatasetError::PoseCountMismatch {
-                path: poses_path,
+        let (mut rows, bad) = read_rows_prefix(&poses_path, 12)?;
+        gt_problem = bad;
+        if gt_problem.is_none() && rows.len() != left.len() {
+            gt_problem = Some(DatasetError::PoseCountMismatch {
+                path: poses_path.clone(),
                 poses: rows.len(),
                 images: left.len(),
             });
+        }
+        if rows.len() > left.len() {
+            // More poses than frames: most likely another sequence's file; no frame's pose can
+            // be trusted, so there is no ground truth (the run warns).
+            rows.clear();
         }
         // Poses are of camera 0; the colour pair's left camera sits P2[0][3]/fx to its side
         // in the rectified frame (pykitti's T2), so G₂ = T₂ G₀ T₂⁻¹ keeps pose 0 the identity.
@@ -88,8 +104,8 @@ pub(crate) fn open(
                     CameraPair::Colour => t2.compose(&g).compose(&t2_inv),
                 }
             })
-            .collect();
-        Some(poses)
+            .collect::<Vec<_>>();
+        (!poses.is_empty()).then_some(poses)
     } else {
         None
     };
@@ -105,6 +121,7 @@ pub(crate) fn open(
         right,
         times_s,
         gt,
+        gt_problem,
         image_size,
     })
 }

@@ -131,6 +131,16 @@ fn locate(root: &Path, drive: &str) -> Result<(PathBuf, PathBuf), DatasetError> 
         if !is_drive_dir(root) {
             return Err(DatasetError::MissingFile { path: under_root });
         }
+        // Handed a drive folder: it must be the drive asked for.
+        let found = super::dir_name(root);
+        if found != folder {
+            return Err(DatasetError::SelectionConflict {
+                path: root.to_path_buf(),
+                what: "drive",
+                asked: drive.to_string(),
+                found,
+            });
+        }
     }
     if is_drive_dir(root) {
         let date_dir = match root.parent() {
@@ -179,18 +189,35 @@ pub(crate) fn open(
     let times_s = check_times(&times_path, read_timestamps(&times_path)?, left.len())?;
 
     let oxts_dir = drive_dir.join("oxts").join("data");
+    let mut gt_problem = None;
     let gt = if oxts_dir.is_dir() {
         let files = list_files(&oxts_dir, "txt")?;
         if files.len() != left.len() {
-            return Err(DatasetError::OxtsCountMismatch {
-                dir: oxts_dir,
+            gt_problem = Some(DatasetError::OxtsCountMismatch {
+                dir: oxts_dir.clone(),
                 oxts: files.len(),
                 images: left.len(),
             });
         }
-        let packets = files.iter().map(|f| oxts::read_packet(f)).collect::<Result<Vec<_>, _>>()?;
-        let t_cam_imu = cam_from_imu(&date_dir, &cam_to_cam, &pl)?;
-        Some(camera_poses(&oxts::imu_poses(&packets), &t_cam_imu, cam_to_cam.path())?)
+        // A record short of the images, or a bad one, ends the ground truth there; more
+        // records than images mean the folder is not this drive's, and none is used.
+        let usable = if files.len() > left.len() { &files[..0] } else { &files[..] };
+        let mut packets = Vec::with_capacity(usable.len());
+        for f in usable {
+            match oxts::read_packet(f) {
+                Ok(p) => packets.push(p),
+                Err(e) => {
+                    gt_problem = Some(e);
+                    break;
+                }
+            }
+        }
+        if packets.is_empty() {
+            None
+        } else {
+            let t_cam_imu = cam_from_imu(&date_dir, &cam_to_cam, &pl)?;
+            Some(camera_poses(&oxts::imu_poses(&packets), &t_cam_imu, cam_to_cam.path())?)
+        }
     } else {
         None
     };
@@ -225,6 +252,7 @@ pub(crate) fn open(
         right,
         times_s,
         gt,
+        gt_problem,
         image_size,
     })
 }

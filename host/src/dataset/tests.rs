@@ -188,9 +188,13 @@ fn poses_line_with_13_numbers() {
     let (tmp, _) = odometry_fixture(2);
     let poses = tmp.path().join("poses/00.txt");
     write(&poses, &format!("{}1 0 0 1 0 1 0 0 0 0 1 0 7\n", pose_line(0.0)));
-    let e = open_odo(&tmp).unwrap_err();
+    // The poses before the bad line are kept; the problem is recorded, not fatal.
+    let seq = open_odo(&tmp).unwrap();
+    assert_eq!(seq.gt.as_ref().map(Vec::len), Some(1));
+    let e = seq.gt_problem.clone().expect("problem recorded");
     assert_eq!(e, DatasetError::BadFieldCount { path: poses, line: 2, expected: 12, got: 13 });
     names(&e, "00.txt:2");
+    assert_eq!(seq.summary().gt_frames, 1);
 }
 
 #[test]
@@ -198,9 +202,21 @@ fn poses_count_differs_from_images() {
     let (tmp, _) = odometry_fixture(3);
     let poses = tmp.path().join("poses/00.txt");
     write(&poses, &pose_line(0.0));
-    let e = open_odo(&tmp).unwrap_err();
-    assert_eq!(e, DatasetError::PoseCountMismatch { path: poses, poses: 1, images: 3 });
+    let seq = open_odo(&tmp).unwrap();
+    assert_eq!(seq.gt.as_ref().map(Vec::len), Some(1));
+    let e = seq.gt_problem.clone().expect("problem recorded");
+    assert_eq!(e, DatasetError::PoseCountMismatch { path: poses.clone(), poses: 1, images: 3 });
     names(&e, "00.txt");
+    // More poses than images: another sequence's file; none is used.
+    write(&poses, &[pose_line(0.0), pose_line(1.0), pose_line(2.0), pose_line(3.0)].concat());
+    let seq = open_odo(&tmp).unwrap();
+    assert!(seq.gt.is_none());
+    assert!(matches!(seq.gt_problem, Some(DatasetError::PoseCountMismatch { poses: 4, .. })));
+    // `#` comment lines are skipped.
+    write(&poses, &format!("# x y z\n{}{}{}", pose_line(0.0), pose_line(1.0), pose_line(2.0)));
+    let seq = open_odo(&tmp).unwrap();
+    assert_eq!(seq.gt.as_ref().map(Vec::len), Some(3));
+    assert!(seq.gt_problem.is_none());
 }
 
 #[test]
@@ -410,7 +426,9 @@ fn oxts_file_with_missing_fields() {
     let line = oxts_line(49.0, 8.4, 0.0);
     let short: Vec<&str> = line.split_whitespace().take(25).collect();
     write(&rec, &short.join(" "));
-    let e = Sequence::open_raw(tmp.path(), "2011_09_26_0001", None).unwrap_err();
+    let seq = Sequence::open_raw(tmp.path(), "2011_09_26_0001", None).unwrap();
+    assert_eq!(seq.gt.as_ref().map(Vec::len), Some(1), "the record before the bad one");
+    let e = seq.gt_problem.clone().expect("problem recorded");
     assert_eq!(e, DatasetError::OxtsFields { path: rec, got: 25 });
     names(&e, "0000000001.txt");
 }
@@ -419,7 +437,9 @@ fn oxts_file_with_missing_fields() {
 fn oxts_count_and_raw_timestamps_checked() {
     let (tmp, drive) = raw_fixture(3);
     fs::remove_file(drive.join("oxts/data/0000000002.txt")).unwrap();
-    let e = Sequence::open_raw(tmp.path(), "2011_09_26_0001", None).unwrap_err();
+    let seq = Sequence::open_raw(tmp.path(), "2011_09_26_0001", None).unwrap();
+    assert_eq!(seq.gt.as_ref().map(Vec::len), Some(2));
+    let e = seq.gt_problem.clone().expect("problem recorded");
     assert!(matches!(e, DatasetError::OxtsCountMismatch { oxts: 2, images: 3, .. }), "{e}");
     names(&e, "data");
 

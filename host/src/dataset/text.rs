@@ -49,15 +49,36 @@ pub(crate) fn parse_f64(path: &Path, line: usize, token: &str) -> Result<f64, Da
     }
 }
 
-/// Non-blank lines of `text` with their 1-based line numbers.
+/// Non-blank lines of `text` with their 1-based line numbers; `#` starts a comment (a whole
+/// line or the rest of one), as in evo's and many users' KITTI pose files.
 pub(crate) fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.lines().enumerate().map(|(i, l)| (i + 1, l.trim())).filter(|(_, l)| !l.is_empty())
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.split('#').next().unwrap_or("").trim()))
+        .filter(|(_, l)| !l.is_empty())
 }
 
 /// A file of lines holding `n` numbers each (KITTI pose files: `n = 12`; `times.txt`: `n = 1`).
 pub(crate) fn read_rows(path: &Path, n: usize) -> Result<Vec<Vec<f64>>, DatasetError> {
     let text = read_text(path)?;
     numbered_lines(&text).map(|(line, l)| parse_numbers(path, line, l, Some(n))).collect()
+}
+
+/// Like [`read_rows`], but a bad line ends the rows instead of failing: the rows before it
+/// and the error. For ground truth, where the frames before a problem are still usable.
+pub(crate) fn read_rows_prefix(
+    path: &Path,
+    n: usize,
+) -> Result<(Vec<Vec<f64>>, Option<DatasetError>), DatasetError> {
+    let text = read_text(path)?;
+    let mut rows = Vec::new();
+    for (line, l) in numbered_lines(&text) {
+        match parse_numbers(path, line, l, Some(n)) {
+            Ok(r) => rows.push(r),
+            Err(e) => return Ok((rows, Some(e))),
+        }
+    }
+    Ok((rows, None))
 }
 
 /// The files in `dir` whose extension is `ext` (case-insensitive), sorted by file name.
@@ -114,5 +135,7 @@ mod tests {
     fn blank_lines_are_skipped_but_numbering_kept() {
         let v: Vec<_> = numbered_lines("a\n\n  \r\nb\r\n").collect();
         assert_eq!(v, vec![(1, "a"), (4, "b")]);
+        let v: Vec<_> = numbered_lines("# header\n1 2 # note\n  # x\n3").collect();
+        assert_eq!(v, vec![(2, "1 2"), (4, "3")]);
     }
 }
