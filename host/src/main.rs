@@ -2,8 +2,8 @@
 //!
 //! Each subcommand lives in its own module under `cli/`; this file only parses arguments,
 //! dispatches, and turns errors into a message naming the file and problem plus exit code 1
-//! (clap uses 2 for usage errors).
-#![forbid(unsafe_code)]
+//! (clap uses 2 for usage errors; a run stopped by a signal exits 128 + the signal).
+#![deny(unsafe_code)]
 
 use clap::{Parser, Subcommand};
 
@@ -47,7 +47,22 @@ enum Command {
     VerifySeg(cli::verify_seg::VerifySegArgs),
 }
 
+/// Unix conventions the Rust runtime does not follow by default: SIGPIPE back to its default
+/// action, so `semloc eval ... | head` ends quietly as other tools do instead of panicking in
+/// `println!`; SIGXFSZ ignored, so a file size limit (`ulimit -f`) turns into a write error
+/// that is reported and leaves whole files, not a kill mid-write.
+#[allow(unsafe_code)]
+fn unix_signal_defaults() {
+    // SAFETY: `signal` with SIG_DFL / SIG_IGN installs no handler code; it runs before any
+    // other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 fn main() -> std::process::ExitCode {
+    unix_signal_defaults();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Eval(args) => cli::eval::run(&args),
@@ -64,8 +79,9 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
-            std::process::ExitCode::FAILURE
+            eprintln!("error: {}", cli::error_text(&e));
+            let code = e.downcast_ref::<cli::Exit>().map_or(1, |x| x.code);
+            std::process::ExitCode::from(code)
         }
     }
 }

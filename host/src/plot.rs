@@ -32,10 +32,10 @@ pub enum PlotError {
         #[source]
         source: image::ImageError,
     },
-    /// The output directory could not be created.
+    /// The output directory could not be created, or a plot file could not be written.
     #[error("{}: {source}", path.display())]
     Io {
-        /// The directory.
+        /// The directory or file.
         path: PathBuf,
         /// The underlying error.
         #[source]
@@ -184,10 +184,15 @@ impl Canvas {
         self.text_centered(w / 2.0, if scale == 2 { 15.0 } else { 20.0 }, s, scale, BLACK);
     }
 
+    /// Encodes the PNG in memory and writes it through a temporary file and a rename, so a
+    /// failed write (disk full) never leaves a truncated image.
     fn save(&self, path: &Path) -> Result<(), PlotError> {
+        let mut png = std::io::Cursor::new(Vec::new());
         self.img
-            .save_with_format(path, image::ImageFormat::Png)
-            .map_err(|source| PlotError::Image { path: path.to_path_buf(), source })
+            .write_to(&mut png, image::ImageFormat::Png)
+            .map_err(|source| PlotError::Image { path: path.to_path_buf(), source })?;
+        crate::run::stream::write_atomic_io(path, png.get_ref())
+            .map_err(|source| PlotError::Io { path: path.to_path_buf(), source })
     }
 }
 

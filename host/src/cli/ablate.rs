@@ -30,24 +30,33 @@ pub struct AblateArgs {
     /// run` writes, plus `ablation.json` and `ablation.txt` (the table).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Use a non-empty --out: first remove what `semloc ablate` wrote there before.
+    #[arg(long)]
+    pub force: bool,
     /// The segmentation network (`.slm`) that labels the frames for the semantic rows; without
     /// it the sequence's own `semantic/` labels are used (synthetic sequences have them).
     #[arg(long, value_name = "SLM")]
     pub model: Option<PathBuf>,
     /// Semantic settings to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "off,cull,full,motion")]
+    #[arg(
+        long,
+        value_enum,
+        ignore_case = true,
+        value_delimiter = ',',
+        default_value = "off,cull,full,motion"
+    )]
     pub semantics: Vec<SemanticsArg>,
     /// Association settings to run (comma-separated).
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "hard,em")]
+    #[arg(long, value_enum, ignore_case = true, value_delimiter = ',', default_value = "hard,em")]
     pub assoc: Vec<AssocArg>,
-    /// Process only the first N frames.
-    #[arg(long, value_name = "N")]
-    pub max_frames: Option<usize>,
+    /// Process only the first N frames (N ≥ 1).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_frames: Option<u64>,
     /// Worker threads for every row (1 or 2; results are identical, timings are not).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
     pub threads: u8,
     /// ATE alignment (see `semloc eval --help`).
-    #[arg(long, value_enum, default_value_t = AlignArg::Se3)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = AlignArg::Se3)]
     pub align: AlignArg,
 }
 
@@ -170,11 +179,14 @@ pub fn run_rows<'a>(
     out: &std::path::Path,
 ) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
+    let stop = semloc::run::StopFlag::new();
+    stop.register_signals().context("installing the SIGINT/SIGTERM handlers")?;
     for &(semantics, assoc) in pairs {
         let (s, a) = (semantics.name(), association_name(assoc));
         let dir = out.join(format!("{s}-{a}"));
         let mut cfg = base();
         cfg.out = dir.clone();
+        cfg.stop = Some(stop.clone());
         cfg.semantics = semantics;
         cfg.tracker.association = assoc;
         if semantics == Semantics::Off {
@@ -183,10 +195,22 @@ pub fn run_rows<'a>(
         }
         eprintln!("{s} / {a} ...");
         let outcome = run_with_progress(cfg)?;
+        super::print_warnings(&outcome.warnings);
         if let Some(e) = &outcome.failure {
-            anyhow::bail!(
-                "semantics {s} / assoc {a} stopped after {} frames: {e} (outputs so far in {})",
+            let message = format!(
+                "semantics {s} / assoc {a} stopped after {} of {} frames: {} (outputs so far \
+                 in {}; the rows after it were not run)",
                 outcome.summary.frames_processed,
+                outcome.summary.frames_requested,
+                semloc::run::outputs::error_chain(e),
+                dir.display()
+            );
+            return Err(super::Exit { code: e.exit_code(), message }.into());
+        }
+        if let Some(e) = &outcome.eval_error {
+            anyhow::bail!(
+                "semantics {s} / assoc {a}: the evaluation failed: {} (outputs in {})",
+                semloc::run::outputs::error_chain(e),
                 dir.display()
             );
         }
@@ -234,10 +258,19 @@ pub fn run(args: &AblateArgs) -> Result<()> {
             seq.root.join("semantic").display()
         );
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating output folder {}", args.out.display()))?;
+    let ours = ablate_outputs();
+    let ours: Vec<&str> = ours.iter().map(String::as_str).collect();
+    let kept = semloc::run::prepare_output_dir(&args.out, args.force, &ours)?;
+    if !kept.is_empty() {
+        super::print_warnings(&[format!(
+            "{} holds files semloc did not write ({}); they were left in place",
+            args.out.display(),
+            kept.join(", ")
+        )]);
+    }
     let base = || RunConfig {
-        max_frames: args.max_frames,
+        max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
+        command_line: super::command_line(),
         threads: args.threads,
         network: args.model.clone().map(Network::File),
         align: args.align.into(),
@@ -335,4 +368,16 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         .with_context(|| format!("writing {}", p.display()))?;
     println!("outputs in {}", args.out.display());
     Ok(())
+}
+
+/// Every entry `semloc ablate` (or `demo`) may write into its output folder: the tables and
+/// one `semantics-assoc` folder per possible row.
+pub fn ablate_outputs() -> Vec<String> {
+    let mut v: Vec<String> = ["ablation.json", "ablation.txt", "sequence"].map(String::from).into();
+    for s in [Semantics::Off, Semantics::Cull, Semantics::Full, Semantics::Motion] {
+        for a in [Association::Hard, Association::Em] {
+            v.push(format!("{}-{}", s.name(), association_name(a)));
+        }
+    }
+    v
 }

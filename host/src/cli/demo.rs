@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use semloc::dataset::Sequence;
 use semloc::run::{Network, RunConfig, Semantics};
@@ -20,9 +20,12 @@ pub struct DemoArgs {
     /// temp dir, kept and printed at the end).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Use a non-empty --out: first remove what `semloc demo` wrote there before.
+    #[arg(long)]
+    pub force: bool,
     /// Frames to generate (10 Hz).
-    #[arg(long, default_value_t = 120, value_name = "N")]
-    pub frames: usize,
+    #[arg(long, default_value_t = 120, value_name = "N", value_parser = clap::value_parser!(u64).range(3..))]
+    pub frames: u64,
     /// Seed of the synthetic street and traffic.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -51,15 +54,28 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         Some(d) => d.clone(),
         None => std::env::temp_dir().join(format!("semloc-demo-{}", std::process::id())),
     };
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let ours = super::ablate::ablate_outputs();
+    let ours: Vec<&str> = ours.iter().map(String::as_str).collect();
+    let kept = semloc::run::prepare_output_dir(&out, args.force, &ours)?;
+    if !kept.is_empty() {
+        super::print_warnings(&[format!(
+            "{} holds files semloc did not write ({}); they were left in place",
+            out.display(),
+            kept.join(", ")
+        )]);
+    }
     let dynamics = match args.dynamics {
         DynamicsArg::Static => Dynamics::Static,
         DynamicsArg::Low => Dynamics::Low,
         DynamicsArg::High => Dynamics::High,
     };
     let data = out.join("sequence");
-    let cfg =
-        SynthConfig { frames: args.frames, dynamics, seed: args.seed, ..SynthConfig::default() };
+    let cfg = SynthConfig {
+        frames: args.frames as usize,
+        dynamics,
+        seed: args.seed,
+        ..SynthConfig::default()
+    };
     let t = Instant::now();
     let synth = generate(&data, &cfg)?;
     println!(

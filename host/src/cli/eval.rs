@@ -19,17 +19,22 @@ pub struct EvalArgs {
     pub est: PathBuf,
     /// File format of both trajectories; `auto` looks at the first data line (12 fields: KITTI,
     /// 8 fields: TUM).
-    #[arg(long, value_enum, default_value_t = FormatArg::Auto)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = FormatArg::Auto)]
     pub format: FormatArg,
     /// Alignment of the estimate to ground truth before ATE: `se3` rotation+translation (as
     /// `evo_ape kitti -a`), `sim3` adds scale (`-as`), `none` compares raw positions.
     /// t_rel/r_rel are relative measures and do not depend on it.
-    #[arg(long, value_enum, default_value_t = AlignArg::Se3)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = AlignArg::Se3)]
     pub align: AlignArg,
     /// TUM files only: the largest timestamp difference (seconds) at which an estimated pose is
     /// associated with a ground-truth pose (evo's default is 0.01).
     #[arg(long, default_value_t = 0.01, value_name = "SECONDS")]
     pub max_time_diff: f64,
+    /// KITTI files only: evaluate an estimate with fewer poses than the ground truth (a run
+    /// that stopped early) against the ground truth's first poses. Without it a length
+    /// mismatch is an error.
+    #[arg(long)]
+    pub prefix: bool,
     /// Also write the full report (summary, per-length table, per-segment errors) as JSON here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
@@ -92,8 +97,9 @@ fn load(path: &std::path::Path, format: FormatArg) -> Result<Loaded> {
     })
 }
 
-/// Pairs up poses: index by index for KITTI files, by nearest timestamp for TUM files.
-fn associate(gt: Loaded, est: Loaded, max_dt: f64) -> Result<(Vec<Se3>, Vec<Se3>)> {
+/// Pairs up poses: index by index for KITTI files (with `prefix`, an estimate shorter than
+/// the ground truth takes its first poses), by nearest timestamp, one to one, for TUM files.
+fn associate(gt: Loaded, est: Loaded, max_dt: f64, prefix: bool) -> Result<(Vec<Se3>, Vec<Se3>)> {
     match (gt.times, est.times) {
         (Some(tg), Some(te)) => {
             let pairs = traj::associate_by_time(&tg, &te, max_dt);
@@ -102,7 +108,20 @@ fn associate(gt: Loaded, est: Loaded, max_dt: f64) -> Result<(Vec<Se3>, Vec<Se3>
             }
             Ok(pairs.iter().map(|&(i, j)| (gt.poses[i], est.poses[j])).unzip())
         }
-        (None, None) => Ok((gt.poses, est.poses)),
+        (None, None) => {
+            let (g, e) = (gt.poses.len(), est.poses.len());
+            if e < g && !prefix {
+                bail!(
+                    "the estimate has {e} poses and the ground truth {g}; if the run stopped \
+                     early, pass --prefix to evaluate against the first {e} ground-truth poses"
+                );
+            }
+            let mut gt_poses = gt.poses;
+            if prefix {
+                gt_poses.truncate(e);
+            }
+            Ok((gt_poses, est.poses))
+        }
         _ => bail!(
             "one trajectory has timestamps (TUM) and the other has none (KITTI); \
              convert one of them or pass both in the same format"
@@ -114,14 +133,14 @@ fn associate(gt: Loaded, est: Loaded, max_dt: f64) -> Result<(Vec<Se3>, Vec<Se3>
 pub fn run(args: &EvalArgs) -> Result<()> {
     let gt = load(&args.gt, args.format)?;
     let est = load(&args.est, args.format)?;
-    let (gt, est) = associate(gt, est, args.max_time_diff)?;
+    let (gt, est) = associate(gt, est, args.max_time_diff, args.prefix)?;
     let report = evaluate(&gt, &est, args.align.into()).with_context(|| {
         format!("evaluating {} against {}", args.est.display(), args.gt.display())
     })?;
     println!("{report}");
+    super::print_warnings(&report.warnings);
     if let Some(json) = &args.json {
-        let text = serde_json::to_string_pretty(&report)?;
-        std::fs::write(json, text).with_context(|| format!("writing {}", json.display()))?;
+        semloc::run::outputs::write_json(json, &report)?;
         println!("wrote {}", json.display());
     }
     if let Some(dir) = &args.plot {

@@ -3,10 +3,10 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use semloc::eval::EvalReport;
-use semloc::run::{Network, RunConfig, RunResult, Semantics, Summary};
+use semloc::run::{Network, RunConfig, RunResult, Semantics, StopFlag, Summary};
 use semloc_core::tracker::TrackerParams;
 
 use super::info::DatasetArgs;
@@ -18,12 +18,17 @@ pub struct RunArgs {
     #[command(flatten)]
     pub data: DatasetArgs,
     /// Output folder (created): trajectory.txt (KITTI), trajectory_tum.txt, frames.csv,
-    /// summary.json and, with ground truth, eval.json and plots/.
+    /// summary.json and, with ground truth, eval.json and plots/. The per-frame files are
+    /// written as frames are tracked; a folder that is not empty is refused unless --force.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// Process only the first N frames.
-    #[arg(long, value_name = "N")]
-    pub max_frames: Option<usize>,
+    /// Use a non-empty --out: first remove what semloc wrote there before (the files listed
+    /// above; anything else is left in place, with a warning).
+    #[arg(long)]
+    pub force: bool,
+    /// Process only the first N frames (N ≥ 1).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_frames: Option<u64>,
     /// Worker threads: 2 extracts the left and right images in parallel (the target has two
     /// cores); 1 runs everything on one thread. Results are identical either way.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
@@ -38,7 +43,7 @@ pub struct RunArgs {
     /// only where the object is tested moving against the ego-motion). Labels come from the int8 network given with --model, else from the
     /// sequence's `semantic/` folder (ground-truth labels, as `semloc synth` writes them); with
     /// neither it is an error.
-    #[arg(long, value_enum, default_value_t = SemanticsArg::Off)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = SemanticsArg::Off)]
     pub semantics: SemanticsArg,
     /// The segmentation network (`.slm`, from `semloc convert`; e.g.
     /// models/artefacts/fastscnn_r2_192x640.slm) that labels every left frame, pipelined on the
@@ -48,10 +53,10 @@ pub struct RunArgs {
     /// Data association: `hard` (nearest neighbour in descriptor space, ORB-SLAM2) or `em`
     /// (EM over gated candidates with geometry, ORB, class and semantic-descriptor terms and a
     /// null hypothesis; class and semantic terms need --semantics).
-    #[arg(long, value_enum, default_value_t = AssocArg::Hard)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = AssocArg::Hard)]
     pub assoc: AssocArg,
     /// ATE alignment for the evaluation (see `semloc eval --help`).
-    #[arg(long, value_enum, default_value_t = super::eval::AlignArg::Se3)]
+    #[arg(long, value_enum, ignore_case = true, default_value_t = super::eval::AlignArg::Se3)]
     pub align: super::eval::AlignArg,
 }
 
@@ -98,8 +103,16 @@ impl From<SemanticsArg> for Semantics {
     }
 }
 
-/// Runs `cfg` behind a progress bar.
-pub fn run_with_progress(cfg: RunConfig<'_>) -> Result<RunResult> {
+/// Runs `cfg` behind a progress bar, with SIGINT/SIGTERM routed to its stop flag.
+pub fn run_with_progress(mut cfg: RunConfig<'_>) -> Result<RunResult> {
+    if cfg.stop.is_none() {
+        let stop = StopFlag::new();
+        stop.register_signals().context("installing the SIGINT/SIGTERM handlers")?;
+        cfg.stop = Some(stop);
+    }
+    if cfg.command_line.is_empty() {
+        cfg.command_line = super::command_line();
+    }
     let pb = super::progress(cfg.frame_count() as u64, "tracking");
     let result = semloc::run::run_observed(cfg, &mut |_| pb.inc(1));
     pb.finish_and_clear();
@@ -110,7 +123,7 @@ pub fn run_with_progress(cfg: RunConfig<'_>) -> Result<RunResult> {
 pub fn run(args: &RunArgs) -> Result<()> {
     let seq = args.data.open()?;
     let cfg = RunConfig {
-        max_frames: args.max_frames,
+        max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
         threads: args.threads,
         tracker: TrackerParams {
             ransac_iterations: args.ransac_iterations,
@@ -120,25 +133,55 @@ pub fn run(args: &RunArgs) -> Result<()> {
         semantics: args.semantics.into(),
         network: args.model.clone().map(Network::File),
         align: args.align.into(),
+        force: args.force,
         ..RunConfig::new(&seq, &args.out)
     };
     let outcome = run_with_progress(cfg)?;
-    print_summary(&outcome.summary, outcome.eval.as_ref(), &args.out);
-    match outcome.failure {
-        Some(e) => Err(anyhow::Error::new(e).context(format!(
-            "stopped after {} frames (outputs so far are in {})",
-            outcome.summary.frames_processed,
-            args.out.display()
-        ))),
-        None => Ok(()),
+    for n in &outcome.notices {
+        eprintln!("note: {n}");
     }
+    print_summary(&outcome.summary, outcome.eval.as_ref(), &args.out);
+    super::print_warnings(&outcome.warnings);
+    finish(&outcome, &args.out)
+}
+
+/// The exit of a finished run: success when complete and evaluated where it could be; the
+/// stop (signal: 128 + it), or the evaluation failure, as an error otherwise. Outputs are
+/// already written either way.
+pub fn finish(outcome: &RunResult, out: &Path) -> Result<()> {
+    let s = &outcome.summary;
+    if let Some(f) = &outcome.failure {
+        let message = format!(
+            "{}; stopped after {} of {} frames (outputs up to there are in {}, summary.json \
+             marked \"complete\": false)",
+            semloc::run::outputs::error_chain(f),
+            s.frames_processed,
+            s.frames_requested,
+            out.display()
+        );
+        return Err(super::Exit { code: f.exit_code(), message }.into());
+    }
+    if let Some(e) = &outcome.eval_error {
+        return Err(anyhow::anyhow!(
+            "all {} frames tracked and written to {}, but the evaluation failed: {}",
+            s.frames_processed,
+            out.display(),
+            semloc::run::outputs::error_chain(e)
+        ));
+    }
+    Ok(())
 }
 
 fn print_summary(s: &Summary, eval: Option<&EvalReport>, out: &Path) {
-    println!("{} frames of {} ({} thread(s))", s.frames_processed, s.dataset.name, s.threads);
+    let state = if s.complete { String::new() } else { " (incomplete)".to_string() };
     println!(
-        "keyframes {}, lost {}, median stereo matches {:.0}, median inliers {:.0}",
-        s.keyframes, s.lost, s.median_stereo_matches, s.median_inliers
+        "{} of {} frames of {}{state} ({} thread(s))",
+        s.frames_processed, s.frames_requested, s.dataset.name, s.threads
+    );
+    println!(
+        "keyframes {}, frames not tracked {} ({} losses), median stereo matches {:.0}, median \
+         inliers {:.0}",
+        s.keyframes, s.lost, s.losses, s.median_stereo_matches, s.median_inliers
     );
     println!("core memory {:.1} MiB", s.core_memory_bytes as f64 / 1048576.0);
     if s.network_memory_bytes > 0 {
@@ -154,10 +197,11 @@ fn print_summary(s: &Summary, eval: Option<&EvalReport>, out: &Path) {
             p.median_ms, p.p90_ms, p.p99_ms, p.max_ms
         );
     }
-    if let Some(e) = eval {
-        println!("{e}");
-    } else {
-        println!("no ground truth: trajectory written, not evaluated");
+    match eval {
+        Some(e) => println!("{e}"),
+        None if s.eval_error.is_some() => println!("not evaluated (see the error below)"),
+        None if s.dataset.has_gt => println!("not evaluated (see the warnings below)"),
+        None => println!("no ground truth for this sequence: trajectory written, not evaluated"),
     }
     println!("outputs in {}", out.display());
 }

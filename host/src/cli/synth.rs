@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use semloc::synth::{generate_with_progress, Dynamics, SynthConfig};
 
@@ -12,9 +12,14 @@ use semloc::synth::{generate_with_progress, Dynamics, SynthConfig};
 #[derive(Args, Debug)]
 pub struct SynthArgs {
     /// Output root: `sequences/XX/...` and `poses/XX.txt` are written under it (created if
-    /// missing; existing frames are overwritten).
+    /// missing). An existing `sequences/XX` is refused unless --force.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Replace an existing synthetic `sequences/XX` (and `poses/XX.txt`): removed first, so no
+    /// frame of the old sequence is left among the new ones. A folder `semloc synth` did not
+    /// write (no `semantic/` and `dynamic/` folders) is never removed.
+    #[arg(long)]
+    pub force: bool,
     /// Number of stereo frames (10 Hz).
     #[arg(long, default_value_t = 200)]
     pub frames: usize,
@@ -73,6 +78,7 @@ pub fn run(args: &SynthArgs) -> Result<()> {
         seq: args.seq.clone(),
         threads: args.threads,
     };
+    clear_sequence(&args.out, &args.seq, args.force)?;
     let pb = super::progress(args.frames as u64, "synth");
     let summary = generate_with_progress(&args.out, &cfg, &|done| pb.set_position(done as u64))?;
     pb.finish_and_clear();
@@ -80,6 +86,37 @@ pub fn run(args: &SynthArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         println!("{summary}");
+    }
+    Ok(())
+}
+
+/// Makes room for sequence `seq` under `out`: nothing to do when `sequences/<seq>` is missing
+/// or empty; otherwise an error, unless `force` and the folder is one `semloc synth` wrote,
+/// which is then removed with its pose file.
+pub fn clear_sequence(out: &std::path::Path, seq: &str, force: bool) -> Result<()> {
+    let dir = out.join("sequences").join(seq);
+    let occupied = std::fs::read_dir(&dir).is_ok_and(|mut d| d.next().is_some());
+    if !occupied {
+        return Ok(());
+    }
+    if !force {
+        anyhow::bail!(
+            "{} already holds a sequence; choose another --out or --seq, or pass --force to \
+             replace it",
+            dir.display()
+        );
+    }
+    if !(dir.join("semantic").is_dir() && dir.join("dynamic").is_dir()) {
+        anyhow::bail!(
+            "{} was not written by `semloc synth` (no semantic/ and dynamic/ folders); it is not \
+             removed, even with --force",
+            dir.display()
+        );
+    }
+    std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
+    let poses = out.join("poses").join(format!("{seq}.txt"));
+    if poses.exists() {
+        std::fs::remove_file(&poses).with_context(|| format!("removing {}", poses.display()))?;
     }
     Ok(())
 }

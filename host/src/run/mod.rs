@@ -14,7 +14,9 @@
 //! the outputs and the caller.
 
 pub mod outputs;
+pub mod provenance;
 pub mod stats;
+pub mod stream;
 
 use std::path::{Path, PathBuf};
 
@@ -33,7 +35,9 @@ use crate::nn::{NnFileError, SlmBlob};
 use crate::pipeline::{FrameOutput, FrameSource, Pipeline, PipelineError};
 
 pub use outputs::{EvalSummary, MotionSummary, Summary, FRAMES_CSV_HEADER};
+pub use provenance::{ModelInfo, Provenance};
 pub use stats::{percentiles, Percentiles};
+pub use stream::{prepare_output_dir, signal_name, write_atomic, StopFlag, RUN_OUTPUTS};
 
 /// Semantic weighting of left-image features (the paper's §3.1).
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -104,6 +108,14 @@ pub struct RunConfig<'a> {
     pub network: Option<Network>,
     /// ATE alignment of the evaluation.
     pub align: Align,
+    /// A non-empty output folder is refused unless this is set; then what semloc wrote there
+    /// before is removed first ([`prepare_output_dir`]).
+    pub force: bool,
+    /// Checked between frames: once set, the run stops after the current frame and writes
+    /// its outputs marked incomplete.
+    pub stop: Option<StopFlag>,
+    /// The command line, recorded in `summary.json`'s provenance.
+    pub command_line: Vec<String>,
 }
 
 impl<'a> RunConfig<'a> {
@@ -119,6 +131,9 @@ impl<'a> RunConfig<'a> {
             semantics: Semantics::Off,
             network: None,
             align: Align::Se3,
+            force: false,
+            stop: None,
+            command_line: Vec::new(),
         }
     }
 
@@ -217,8 +232,49 @@ pub struct RunResult {
     pub summary: Summary,
     /// The content of `eval.json`, when the sequence has ground truth (and ≥ 3 frames ran).
     pub eval: Option<EvalReport>,
-    /// The error of the frame that ended the run early, if one did.
-    pub failure: Option<PipelineError>,
+    /// What ended the run before its last frame, if anything did (a frame's error, a failed
+    /// output write, a signal). Everything processed before it is in the outputs.
+    pub failure: Option<RunFailure>,
+    /// Why the trajectory was not evaluated although the sequence has ground truth, or why
+    /// writing the evaluation failed (`summary.json` says so too).
+    pub eval_error: Option<RunError>,
+    /// Things the user should know (also in `summary.json`'s `warnings`).
+    pub warnings: Vec<String>,
+    /// Information worth printing (e.g. how frames are fitted to the network input).
+    pub notices: Vec<String>,
+}
+
+/// What ended a run early.
+#[derive(Debug, thiserror::Error)]
+pub enum RunFailure {
+    /// A signal (SIGINT, SIGTERM) asked the run to stop; it stopped after the current frame.
+    #[error("stopped by {}", signal_name(*.0))]
+    Signal(i32),
+    /// A frame could not be processed.
+    #[error(transparent)]
+    Frame(#[from] PipelineError),
+    /// An output file could not be written (disk full, file size limit, permissions).
+    #[error(transparent)]
+    Output(RunError),
+}
+
+impl RunFailure {
+    /// `summary.json`'s `stopped_by`: `signal`, `frame_error` or `output_error`.
+    pub fn stopped_by(&self) -> &'static str {
+        match self {
+            Self::Signal(_) => "signal",
+            Self::Frame(_) => "frame_error",
+            Self::Output(_) => "output_error",
+        }
+    }
+
+    /// The exit status a CLI should end with: 128 + the signal, else 1.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            Self::Signal(s) => (128 + s).clamp(1, 255) as u8,
+            _ => 1,
+        }
+    }
 }
 
 impl RunResult {
@@ -266,6 +322,45 @@ pub enum RunError {
     /// The network file could not be loaded.
     #[error(transparent)]
     Network(#[from] NnFileError),
+    /// The output folder holds files and `--force` was not given.
+    #[error(
+        "output folder {} is not empty ({}); choose another folder, or pass --force to replace \
+         the outputs of an earlier run there",
+        path.display(),
+        list_names(entries)
+    )]
+    OutputNotEmpty {
+        /// The folder.
+        path: PathBuf,
+        /// What it holds.
+        entries: Vec<String>,
+    },
+    /// The network's input is a different shape from the frames: most of it would be padding
+    /// and its labels garbage.
+    #[error(
+        "{}: the network's input is {}x{} but the frames are {width}x{height}; fitted by an \
+         integer down-scaling of {factor}, they cover only {:.0} % of the input (at least {:.0} \
+         % needed). Use a network exported for this image shape (models/export.py --size HxW)",
+        path.display(),
+        input.0,
+        input.1,
+        coverage * 100.0,
+        MIN_INPUT_COVERAGE * 100.0
+    )]
+    NetworkShape {
+        /// The network file.
+        path: PathBuf,
+        /// Network input (width, height).
+        input: (usize, usize),
+        /// Frame width (px).
+        width: u32,
+        /// Frame height (px).
+        height: u32,
+        /// The letterbox's down-scaling factor.
+        factor: usize,
+        /// Share of the input the frame covers.
+        coverage: f64,
+    },
     /// The network's input cannot take the sequence's frames.
     #[error("{} on {width}x{height} frames", path.display())]
     NetworkInput {
@@ -305,6 +400,19 @@ pub enum RunError {
     Json(#[from] serde_json::Error),
 }
 
+/// The smallest share of the network input a frame must cover: below it the network sees
+/// mostly padding, at a scale it was not trained for (CamVid's 384x480 network on KITTI
+/// frames covers 28 % and labels nearly everything one class).
+pub const MIN_INPUT_COVERAGE: f64 = 0.8;
+
+fn list_names(names: &[String]) -> String {
+    let shown: Vec<&str> = names.iter().take(4).map(String::as_str).collect();
+    match names.len() {
+        n if n > 4 => format!("{}, and {} more", shown.join(", "), n - 4),
+        _ => shown.join(", "),
+    }
+}
+
 /// Loads the network in `path` and checks that it takes `width`x`height` frames.
 pub fn load_network(path: &Path, width: u32, height: u32) -> Result<Segmenter, RunError> {
     let seg = Segmenter::new(SlmBlob::load(path)?)?;
@@ -312,16 +420,47 @@ pub fn load_network(path: &Path, width: u32, height: u32) -> Result<Segmenter, R
     Ok(seg)
 }
 
-fn check_network_input(seg: &Segmenter, width: u32, height: u32) -> Result<(), RunError> {
-    match seg.letterbox(width as usize, height as usize) {
-        Ok(_) => Ok(()),
-        Err(source) => Err(RunError::NetworkInput {
+/// Checks that `seg` can label `width`x`height` frames: the letterbox fits, and the frame
+/// covers at least [`MIN_INPUT_COVERAGE`] of the input.
+pub fn check_network_input(seg: &Segmenter, width: u32, height: u32) -> Result<(), RunError> {
+    let lb = seg.letterbox(width as usize, height as usize).map_err(|source| {
+        RunError::NetworkInput {
             path: seg.blob().path().to_path_buf(),
             width,
             height,
             source: Box::new(source),
-        }),
+        }
+    })?;
+    let (h, w) = seg.input_size();
+    let coverage = provenance::input_coverage(width, height, lb.factor, w, h);
+    if coverage < MIN_INPUT_COVERAGE {
+        return Err(RunError::NetworkShape {
+            path: seg.blob().path().to_path_buf(),
+            input: (w, h),
+            width,
+            height,
+            factor: lb.factor,
+            coverage,
+        });
     }
+    Ok(())
+}
+
+/// The notice printed when a network's input does not match the frames exactly.
+fn letterbox_notice(m: &ModelInfo, width: u32, height: u32) -> Option<String> {
+    let f = m.downscale.max(1);
+    (m.coverage < 0.999).then(|| {
+        format!(
+            "network {}: {width}x{height} frames are down-scaled 1/{f} to {}x{} and padded to its \
+             {}x{} input ({:.1} % padding)",
+            m.name,
+            (width as usize).div_ceil(f),
+            (height as usize).div_ceil(f),
+            m.input_width,
+            m.input_height,
+            (1.0 - m.coverage) * 100.0
+        )
+    })
 }
 
 /// Frames tracked by [`track_frames`].
@@ -329,20 +468,25 @@ fn check_network_input(seg: &Segmenter, width: u32, height: u32) -> Result<(), R
 pub struct Tracked {
     /// One record per frame processed, in order.
     pub frames: Vec<FrameRecord>,
-    /// The error of the frame that stopped the loop, if one did.
-    pub failure: Option<PipelineError>,
+    /// What stopped the loop before the last frame, if anything did.
+    pub failure: Option<RunFailure>,
 }
 
 /// Feeds frames `0..n` of `src` through `pipe` in order, calling `on_frame` after each; stops
-/// at the first frame that fails and returns its error with the frames before it.
+/// at the first frame that fails, at the first `on_frame` error, or when `stop` is set
+/// (checked before each frame), and returns why with the frames before it.
 pub fn track_frames(
     pipe: &mut Pipeline,
     src: &(impl FrameSource + ?Sized),
     n: usize,
-    on_frame: &mut dyn FnMut(&FrameRecord),
+    stop: Option<&StopFlag>,
+    on_frame: &mut dyn FnMut(&FrameRecord) -> Result<(), RunError>,
 ) -> Tracked {
     let mut frames = Vec::with_capacity(n);
     for i in 0..n {
+        if let Some(sig) = stop.and_then(StopFlag::requested) {
+            return Tracked { frames, failure: Some(RunFailure::Signal(sig)) };
+        }
         match pipe.process_frame(src, i) {
             Ok(output) => {
                 let moving_check = if pipe.tracker().motion_aware() {
@@ -351,10 +495,13 @@ pub fn track_frames(
                     None
                 };
                 let record = FrameRecord { timestamp_s: src.timestamp_s(i), output, moving_check };
-                on_frame(&record);
+                let written = on_frame(&record);
                 frames.push(record);
+                if let Err(e) = written {
+                    return Tracked { frames, failure: Some(RunFailure::Output(e)) };
+                }
             }
-            Err(e) => return Tracked { frames, failure: Some(e) },
+            Err(e) => return Tracked { frames, failure: Some(RunFailure::Frame(e)) },
         }
     }
     Tracked { frames, failure: None }
@@ -365,21 +512,47 @@ pub fn run(cfg: RunConfig<'_>) -> Result<RunResult, RunError> {
     run_observed(cfg, &mut |_| {})
 }
 
-/// Tracks `cfg.seq` as configured, calling `on_frame` after each frame (for progress), then
-/// writes every output into `cfg.out` and returns what was written. A frame that fails ends
-/// the run; everything before it is still written and evaluated, and the error is in
-/// [`RunResult::failure`].
+/// Tracks `cfg.seq` as configured, calling `on_frame` after each frame (for progress), and
+/// writes every output into `cfg.out` (see the module docs) as it goes.
+///
+/// `Err` only when the run cannot start (output folder, network, labels). Once frames are
+/// tracked, whatever happens is reported in the [`RunResult`] instead and every output that
+/// can be written is: the per-frame files hold every processed frame, and `summary.json`
+/// says whether the run is complete, what stopped it, and why the evaluation is missing.
 pub fn run_observed(
     cfg: RunConfig<'_>,
     on_frame: &mut dyn FnMut(&FrameRecord),
 ) -> Result<RunResult, RunError> {
     let n = cfg.frame_count();
-    let RunConfig { seq, out, max_frames: _, threads, tracker, semantics, network, align } = cfg;
-    std::fs::create_dir_all(&out)
-        .map_err(|source| RunError::OutputFolder { path: out.clone(), source })?;
+    let RunConfig {
+        seq,
+        out,
+        max_frames: _,
+        threads,
+        tracker,
+        semantics,
+        network,
+        align,
+        force,
+        stop,
+        command_line,
+    } = cfg;
     let (w, h) = seq.image_size;
     let mut pipe = Pipeline::new(&seq.calib, w, h, tracker, usize::from(threads))?;
-    let segment_timed = network.is_some() && semantics != Semantics::Off;
+    let mut warnings = Vec::new();
+    let mut notices = Vec::new();
+    let network = match network {
+        Some(_) if semantics == Semantics::Off => {
+            warnings.push(
+                "--model is not used with --semantics off (the geometric backbone); the network \
+                 was not loaded"
+                    .to_string(),
+            );
+            None
+        }
+        other => other,
+    };
+    let segment_timed = network.is_some();
     match network {
         Some(Network::File(p)) => pipe.set_segmenter(load_network(&p, w, h)?),
         Some(Network::Loaded(seg)) => {
@@ -391,12 +564,76 @@ pub fn run_observed(
         }
         None => {}
     }
+    let model = pipe.segmenter().map(|s| ModelInfo::of(s, w, h));
+    notices.extend(model.as_ref().and_then(|m| letterbox_notice(m, w, h)));
     pipe.set_semantics(semantics.scheme());
-    let Tracked { frames, failure } = track_frames(&mut pipe, seq, n, on_frame);
-    // Write what exists before reporting a failure: never lose output already computed.
-    outputs::write_frame_outputs(&out, &frames)?;
+    let kept = prepare_output_dir(&out, force, RUN_OUTPUTS)?;
+    if !kept.is_empty() {
+        warnings.push(format!(
+            "{} holds files semloc did not write ({}); they were left in place",
+            out.display(),
+            list_names(&kept)
+        ));
+    }
+    let provenance = Provenance {
+        semloc_version: provenance::VERSION,
+        git_hash: provenance::GIT_HASH,
+        command_line,
+        dataset_path: seq.root.clone(),
+        first_frame: 0,
+        frames_requested: n,
+        semantics: semantics.name(),
+        labels: match (semantics, &model) {
+            (Semantics::Off, _) => "none",
+            (_, Some(_)) => "network",
+            (_, None) => "dataset",
+        },
+        threads,
+        align: align.to_string(),
+        tracker,
+        model,
+    };
+
+    let mut stream = stream::StreamWriter::create(&out)?;
+    let Tracked { frames, failure } =
+        track_frames(&mut pipe, seq, n, stop.as_ref(), &mut |r: &FrameRecord| {
+            stream.append(r)?;
+            on_frame(r);
+            Ok(())
+        });
+    drop(stream);
+
+    // Evaluation: skipped with a reason rather than failing the run.
     let poses: Vec<Se3> = frames.iter().map(|r| r.output.report.t_wc).collect();
-    let eval = outputs::write_eval(&out, seq.gt.as_deref(), &poses, align)?;
+    let mut eval_error = None;
+    let gt = match (&seq.gt, &seq.gt_problem) {
+        (Some(gt), _) if gt.len() >= poses.len() => Some(&gt[..poses.len()]),
+        (_, Some(problem)) => {
+            warnings.push(format!(
+                "ground truth covers {} of the {} frames processed ({problem}); the trajectory \
+                 was not evaluated",
+                seq.gt.as_ref().map_or(0, Vec::len),
+                poses.len()
+            ));
+            None
+        }
+        _ => None,
+    };
+    let eval = match gt {
+        Some(gt) if poses.len() >= 3 => {
+            let (report, error) = outputs::write_eval(&out, gt, &poses, align, &mut warnings);
+            eval_error = error;
+            report
+        }
+        Some(_) => {
+            warnings.push(format!(
+                "{} frame(s) processed: the evaluation needs at least 3; not evaluated",
+                poses.len()
+            ));
+            None
+        }
+        None => None,
+    };
     let inputs = outputs::SummaryInputs {
         seq,
         threads,
@@ -406,8 +643,23 @@ pub fn run_observed(
         stats: pipe.tracker().stats(),
         core_memory_bytes: Pipeline::memory_bytes(),
         network_memory_bytes: pipe.segmenter().map_or(0, Segmenter::memory_bytes),
+        frames_requested: n,
+        failure: failure.as_ref(),
+        eval_error: eval_error.as_ref(),
+        warnings: &warnings,
+        provenance,
     };
     let summary = outputs::summarise(&frames, &inputs, eval.as_ref());
-    outputs::write_json(&out.join("summary.json"), &summary)?;
-    Ok(RunResult { frames, summary, eval, failure })
+    let written = outputs::write_json(&out.join("summary.json"), &summary);
+    // A summary that cannot be written is an output failure unless the run already failed
+    // for a reason that explains it (the same disk, usually).
+    let failure = match (failure, written) {
+        (None, Err(e)) => Some(RunFailure::Output(e)),
+        (Some(f), Err(e)) => {
+            warnings.push(format!("summary.json not written: {}", outputs::error_chain(&e)));
+            Some(f)
+        }
+        (f, Ok(())) => f,
+    };
+    Ok(RunResult { frames, summary, eval, failure, eval_error, warnings, notices })
 }

@@ -7,32 +7,46 @@
 //! one trajectory file at a time (about 200 bytes per frame).
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::Path;
 
 use semloc_core::geom::Se3;
 use semloc_core::tracker::TrackerStats;
 
 use super::stats::{column, median, stage_percentiles, Percentiles};
-use super::{association_name, FrameRecord, MovingCheck, RunError};
+use super::{association_name, FrameRecord, MovingCheck, Provenance, RunError, RunFailure};
 use crate::dataset::{DatasetSummary, Sequence};
 use crate::eval::{evaluate, Align, EvalReport};
 
-/// Header line of `frames.csv`; [`write_frames_csv`] writes one row of these columns per frame.
+/// Header line of `frames.csv`; [`frames_csv_row`] makes one row of these columns per frame.
+/// `status` is how the pose was obtained (`initialised`, `tracked`, `lost`, `coasted`,
+/// `reinitialised`: see `semloc_core::tracker::FrameStatus`); `lost` is 1 on the frame where
+/// tracking failed.
 pub const FRAMES_CSV_HEADER: &str = "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,\
     extract_wall_ms,stereo_ms,track_ms,seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,\
     keyframe,lost,initialised,landmarks,keyframes,ba_iterations,culled,em_changed,parked,moving,\
-    unproven";
+    unproven,status";
 
 /// What `summary.json` holds.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 #[allow(missing_docs)] // field names are the JSON keys; see the README
 pub struct Summary {
+    /// Every requested frame was processed and every output written.
+    pub complete: bool,
+    /// What ended the run early: `signal`, `frame_error` or `output_error` (`null` when
+    /// complete).
+    pub stopped_by: Option<&'static str>,
+    /// The message of what ended it.
+    pub stop_reason: Option<String>,
+    pub frames_requested: usize,
     pub dataset: DatasetSummary,
     pub frames_processed: usize,
     pub threads: u8,
     pub keyframes: u32,
+    /// Frames whose pose was extrapolated, not measured (`frames.csv` status `lost`,
+    /// `coasted` or `reinitialised`).
     pub lost: u32,
+    /// Times tracking was lost (a run of lost frames is one loss).
+    pub losses: u32,
     pub landmark_overflow: u32,
     pub keyframe_evictions: u32,
     pub observation_overflow: u32,
@@ -50,6 +64,12 @@ pub struct Summary {
     pub motion: Option<MotionSummary>,
     pub timing: BTreeMap<&'static str, Percentiles>,
     pub eval: Option<EvalSummary>,
+    /// Why there is no evaluation (or why writing it failed) although there is ground truth.
+    pub eval_error: Option<String>,
+    /// Everything the user was warned about.
+    pub warnings: Vec<String>,
+    /// What the run was made from.
+    pub provenance: Provenance,
 }
 
 /// Motion-aware semantics' totals inside `summary.json` (`null` with other settings).
@@ -72,6 +92,11 @@ pub struct MotionSummary {
 #[allow(missing_docs)]
 pub struct EvalSummary {
     pub align: String,
+    /// The alignment's rotation (deg): large values mean the estimate only matches the ground
+    /// truth turned around (see `eval.json`'s warnings).
+    pub alignment_rotation_deg: f64,
+    /// How far the alignment turns the direction of travel (deg; see `eval.json`).
+    pub alignment_heading_deg: f64,
     pub ate_rmse_m: f64,
     pub t_rel_pct: Option<f64>,
     pub r_rel_deg_per_100m: Option<f64>,
@@ -86,6 +111,8 @@ impl From<&EvalReport> for EvalSummary {
     fn from(e: &EvalReport) -> Self {
         Self {
             align: e.align.to_string(),
+            alignment_rotation_deg: e.alignment_rotation_deg,
+            alignment_heading_deg: e.alignment_heading_deg,
             ate_rmse_m: e.ate_rmse_m,
             t_rel_pct: e.t_rel_pct,
             r_rel_deg_per_100m: e.r_rel_deg_per_100m,
@@ -109,6 +136,26 @@ pub(super) struct SummaryInputs<'a> {
     pub stats: TrackerStats,
     pub core_memory_bytes: usize,
     pub network_memory_bytes: usize,
+    pub frames_requested: usize,
+    pub failure: Option<&'a RunFailure>,
+    pub eval_error: Option<&'a RunError>,
+    pub warnings: &'a [String],
+    pub provenance: Provenance,
+}
+
+/// An error and its causes on one line, each once (`a: b: c`).
+pub fn error_chain(e: &dyn core::error::Error) -> String {
+    let mut parts = vec![e.to_string()];
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        let text = c.to_string();
+        // Messages that already quote their cause are not repeated.
+        if !parts.iter().any(|p| p.contains(&text)) {
+            parts.push(text);
+        }
+        cur = c.source();
+    }
+    parts.join(": ")
 }
 
 /// Builds `summary.json`'s content.
@@ -119,11 +166,16 @@ pub(super) fn summarise(
 ) -> Summary {
     let counter = |f: fn(&FrameRecord) -> f64| median(column(frames, f));
     Summary {
+        complete: inputs.failure.is_none(),
+        stopped_by: inputs.failure.map(RunFailure::stopped_by),
+        stop_reason: inputs.failure.map(|f| error_chain(f)),
+        frames_requested: inputs.frames_requested,
         dataset: inputs.seq.summary(),
         frames_processed: frames.len(),
         threads: inputs.threads,
         keyframes: inputs.stats.keyframes,
-        lost: inputs.stats.lost,
+        lost: inputs.stats.untracked_frames,
+        losses: inputs.stats.lost,
         landmark_overflow: inputs.stats.landmark_overflow,
         keyframe_evictions: inputs.stats.keyframe_evictions,
         observation_overflow: inputs.stats.observation_overflow,
@@ -142,6 +194,9 @@ pub(super) fn summarise(
             .then(|| motion_summary(frames, &inputs.stats)),
         timing: stage_percentiles(frames, inputs.segment_timed),
         eval: eval.map(EvalSummary::from),
+        eval_error: inputs.eval_error.map(|e| error_chain(e)),
+        warnings: inputs.warnings.to_vec(),
+        provenance: inputs.provenance.clone(),
     }
 }
 
@@ -161,86 +216,72 @@ fn motion_summary(frames: &[FrameRecord], stats: &TrackerStats) -> MotionSummary
     }
 }
 
-/// Writes `trajectory.txt`, `trajectory_tum.txt` and `frames.csv` of `frames` into `out`.
-pub fn write_frame_outputs(out: &Path, frames: &[FrameRecord]) -> Result<(), RunError> {
-    let poses: Vec<Se3> = frames.iter().map(|r| r.output.report.t_wc).collect();
-    crate::traj::write_kitti(out.join("trajectory.txt"), &poses)?;
-    let tum: Vec<(f64, Se3)> =
-        frames.iter().map(|r| (r.timestamp_s, r.output.report.t_wc)).collect();
-    crate::traj::write_tum(out.join("trajectory_tum.txt"), &tum)?;
-    write_frames_csv(&out.join("frames.csv"), frames)
+/// One `frames.csv` row (newline included): times in ms with three decimals, timestamp with
+/// six, flags as 0/1, the status by name.
+pub fn frames_csv_row(r: &FrameRecord) -> String {
+    let (o, t) = (&r.output, r.timestamp_s);
+    let (s, rep) = (o.times, o.report);
+    format!(
+        "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+        rep.frame_index,
+        s.load_ms,
+        s.orb_left_ms,
+        s.orb_right_ms,
+        s.extract_wall_ms,
+        s.stereo_ms,
+        s.track_ms,
+        s.seg_ms,
+        s.compute_ms,
+        s.total_ms,
+        o.stereo.matched,
+        rep.matched,
+        rep.inliers,
+        u8::from(rep.keyframe),
+        u8::from(rep.lost),
+        u8::from(rep.initialised),
+        rep.landmarks,
+        rep.keyframes,
+        rep.ba_iterations,
+        o.culled,
+        rep.em_changed,
+        rep.motion.parked_features,
+        rep.motion.moving_features,
+        rep.motion.unproven_features,
+        rep.status.name()
+    )
 }
 
-/// Writes `frames.csv`: [`FRAMES_CSV_HEADER`], then one row per frame (times in ms with three
-/// decimals, timestamp with six, flags as 0/1).
-pub fn write_frames_csv(path: &Path, frames: &[FrameRecord]) -> Result<(), RunError> {
-    let file = std::fs::File::create(path)
-        .map_err(|source| RunError::Create { path: path.to_path_buf(), source })?;
-    let mut f = std::io::BufWriter::new(file);
-    let written = (|| -> std::io::Result<()> {
-        writeln!(f, "{FRAMES_CSV_HEADER}")?;
-        for r in frames {
-            let (o, t) = (&r.output, r.timestamp_s);
-            let (s, rep) = (o.times, o.report);
-            writeln!(
-                f,
-                "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-                rep.frame_index,
-                s.load_ms,
-                s.orb_left_ms,
-                s.orb_right_ms,
-                s.extract_wall_ms,
-                s.stereo_ms,
-                s.track_ms,
-                s.seg_ms,
-                s.compute_ms,
-                s.total_ms,
-                o.stereo.matched,
-                rep.matched,
-                rep.inliers,
-                u8::from(rep.keyframe),
-                u8::from(rep.lost),
-                u8::from(rep.initialised),
-                rep.landmarks,
-                rep.keyframes,
-                rep.ba_iterations,
-                o.culled,
-                rep.em_changed,
-                rep.motion.parked_features,
-                rep.motion.moving_features,
-                rep.motion.unproven_features
-            )?;
-        }
-        f.flush()
-    })();
-    written.map_err(|source| RunError::Write { path: path.to_path_buf(), source })
-}
-
-/// Evaluates `poses` against the first `poses.len()` ground-truth poses and writes `eval.json`
-/// and `plots/` into `out`; `None` (and nothing written) without ground truth or with fewer
-/// than three poses, where no alignment is defined.
+/// Evaluates `poses` against `gt` (the same length, at least three poses) and writes
+/// `eval.json` and `plots/` into `out`; the evaluation's warnings (e.g. a large alignment
+/// rotation) are appended to `warnings`. Returns the report when the evaluation worked, and
+/// the error when it or writing it failed (both when only the writing failed).
 pub fn write_eval(
     out: &Path,
-    gt: Option<&[Se3]>,
+    gt: &[Se3],
     poses: &[Se3],
     align: Align,
-) -> Result<Option<EvalReport>, RunError> {
-    let gt = match gt {
-        Some(gt) if poses.len() >= 3 => &gt[..poses.len()],
-        _ => return Ok(None),
+    warnings: &mut Vec<String>,
+) -> (Option<EvalReport>, Option<RunError>) {
+    let report = match evaluate(gt, poses, align) {
+        Ok(r) => r,
+        Err(e) => return (None, Some(RunError::Eval(e))),
     };
-    let report = evaluate(gt, poses, align).map_err(RunError::Eval)?;
-    write_json(&out.join("eval.json"), &report)?;
+    warnings.extend(report.warnings.iter().cloned());
+    if let Err(e) = write_json(&out.join("eval.json"), &report) {
+        return (Some(report), Some(e));
+    }
     let plots = out.join("plots");
-    std::fs::create_dir_all(&plots)
-        .map_err(|source| RunError::Create { path: plots.clone(), source })?;
-    crate::plot::write_eval_plots(&plots, gt, &report)?;
-    Ok(Some(report))
+    if let Err(source) = std::fs::create_dir_all(&plots) {
+        return (Some(report), Some(RunError::Create { path: plots, source }));
+    }
+    if let Err(e) = crate::plot::write_eval_plots(&plots, gt, &report) {
+        return (Some(report), Some(RunError::Plot(e)));
+    }
+    (Some(report), None)
 }
 
-/// Writes `value` as pretty-printed JSON to `path`.
-pub(super) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), RunError> {
+/// Written through a temporary file and a rename: a reader never sees half of it.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), RunError> {
     let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text)
-        .map_err(|source| RunError::Write { path: path.to_path_buf(), source })
+    super::stream::write_atomic(path, text.as_bytes())
 }

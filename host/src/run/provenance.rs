@@ -1,0 +1,129 @@
+//! What a run was made from, recorded in `summary.json` so a result can be traced and
+//! repeated: the semloc version and commit, the command line, the dataset and frame range,
+//! every tracker parameter, and the network file by name, SHA-256 and input size.
+
+use std::path::PathBuf;
+
+use semloc_core::tracker::TrackerParams;
+use sha2::{Digest, Sha256};
+
+use crate::nn::segment::Segmenter;
+
+/// The semloc version (`Cargo.toml`).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// The git commit the binary was built from (`-dirty` with uncommitted changes to tracked
+/// files; `unknown` when built outside a git checkout).
+pub const GIT_HASH: &str = env!("SEMLOC_GIT_HASH");
+
+/// `summary.json`'s `provenance` block.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Provenance {
+    /// semloc's version.
+    pub semloc_version: &'static str,
+    /// The commit semloc was built from.
+    pub git_hash: &'static str,
+    /// The command line, when the run came from the CLI (empty from the library).
+    pub command_line: Vec<String>,
+    /// The sequence folder.
+    pub dataset_path: PathBuf,
+    /// The first frame and the number of frames asked for.
+    pub first_frame: usize,
+    /// Frames asked for (`--max-frames`, or every frame of the sequence).
+    pub frames_requested: usize,
+    /// Semantic weighting (`off`, `cull`, `full`, `motion`).
+    pub semantics: &'static str,
+    /// Where labels came from: `network`, `dataset` (the sequence's `semantic/` folder) or
+    /// `none`.
+    pub labels: &'static str,
+    /// Worker threads.
+    pub threads: u8,
+    /// ATE alignment of the evaluation.
+    pub align: String,
+    /// Every tracker parameter (association, EM and motion test included).
+    pub tracker: TrackerParams,
+    /// The network, when one labelled the frames.
+    pub model: Option<ModelInfo>,
+}
+
+/// The network a run used.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ModelInfo {
+    /// The `.slm` file.
+    pub path: PathBuf,
+    /// Its file name without the extension (e.g. `fastscnn_r2_192x640`).
+    pub name: String,
+    /// SHA-256 of the file's bytes, lower-case hex.
+    pub sha256: String,
+    /// Network input width and height (px).
+    pub input_width: usize,
+    /// Network input height (px).
+    pub input_height: usize,
+    /// How frames are fitted to the input: the integer down-scaling factor, and the share of
+    /// the input the frame covers (the rest is padding).
+    pub downscale: usize,
+    /// Share of the network input covered by the frame (0..1).
+    pub coverage: f64,
+}
+
+impl ModelInfo {
+    /// Describes `seg` as used on `width`x`height` frames.
+    pub fn of(seg: &Segmenter, width: u32, height: u32) -> Self {
+        let path = seg.blob().path().to_path_buf();
+        let (h, w) = seg.input_size();
+        let (downscale, coverage) = match seg.letterbox(width as usize, height as usize) {
+            Ok(lb) => (lb.factor, input_coverage(width, height, lb.factor, w, h)),
+            Err(_) => (0, 0.0),
+        };
+        Self {
+            name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+            sha256: sha256_hex(seg.blob().bytes()),
+            path,
+            input_width: w,
+            input_height: h,
+            downscale,
+            coverage,
+        }
+    }
+}
+
+/// The share of a `model_w`x`model_h` input that a `width`x`height` frame down-scaled by
+/// `factor` covers.
+pub fn input_coverage(
+    width: u32,
+    height: u32,
+    factor: usize,
+    model_w: usize,
+    model_h: usize,
+) -> f64 {
+    let f = factor.max(1);
+    let cw = (width as usize).div_ceil(f).min(model_w);
+    let ch = (height as usize).div_ceil(f).min(model_h);
+    (cw * ch) as f64 / (model_w * model_h).max(1) as f64
+}
+
+/// Lower-case hex SHA-256 of `bytes`.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sha256_of_known_input() {
+        assert_eq!(
+            sha256_hex(b"abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+    }
+
+    #[test]
+    fn coverage_of_kitti_on_the_shipped_inputs() {
+        // 1241x376 on 192x640 at factor 2: 621x188 of 640x192.
+        let c = input_coverage(1241, 376, 2, 640, 192);
+        assert!((c - 621.0 * 188.0 / (640.0 * 192.0)).abs() < 1e-12, "{c}");
+        // On CamVid's 384x480 input at factor 3: 414x126, under a third of it.
+        assert!(input_coverage(1241, 376, 3, 480, 384) < 0.3);
+    }
+}
