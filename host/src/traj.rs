@@ -548,6 +548,20 @@ mod tests {
     }
 
     #[test]
+    fn association_is_one_to_one() {
+        // A sparse estimate around one ground-truth stamp: evo pairs gt 1.0 with est 0.98
+        // and 1.03 both, counting that ground-truth pose twice in the ATE; only the closer
+        // pair is kept.
+        let gt = [0.0, 1.0, 2.0, 3.0];
+        let est = [0.98, 1.03, 2.0];
+        assert_eq!(nearest_pairs(&gt, &est, 0.1), vec![(1, 0), (1, 1), (2, 2)]);
+        assert_eq!(associate_by_time(&gt, &est, 0.1), vec![(1, 0), (2, 2)]);
+        let mut used: Vec<usize> = associate_by_time(&gt, &est, 0.1).iter().map(|p| p.0).collect();
+        used.dedup();
+        assert_eq!(used.len(), 2);
+    }
+
+    #[test]
     fn files_round_trip_and_missing_file_is_named() {
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("poses.txt");

@@ -137,7 +137,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let report = evaluate(&gt, &est, args.align.into()).with_context(|| {
         format!("evaluating {} against {}", args.est.display(), args.gt.display())
     })?;
-    println!("{report}");
+    super::write_stdout(&format!("{report}\n"));
     super::print_warnings(&report.warnings);
     if let Some(json) = &args.json {
         semloc::run::outputs::write_json(json, &report)?;

@@ -69,3 +69,13 @@ pub fn print_warnings(warnings: &[String]) {
 pub fn command_line() -> Vec<String> {
     std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect()
 }
+
+/// Writes `text` to stdout; a failure other than a closed pipe (a full disk behind `> log`)
+/// becomes a warning on stderr instead of the panic `println!` would end in.
+pub fn write_stdout(text: &str) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        eprintln!("warning: writing the report to stdout failed: {e}");
+    }
+}

@@ -151,12 +151,19 @@ pub fn run(args: &RunArgs) -> Result<()> {
 pub fn finish(outcome: &RunResult, out: &Path) -> Result<()> {
     let s = &outcome.summary;
     if let Some(f) = &outcome.failure {
+        let summary = if outcome.summary_written {
+            "summary.json marked \"complete\": false"
+        } else {
+            "summary.json could not be written"
+        };
+        let progress = if s.frames_processed == s.frames_requested {
+            format!("all {} frames tracked", s.frames_processed)
+        } else {
+            format!("stopped after {} of {} frames", s.frames_processed, s.frames_requested)
+        };
         let message = format!(
-            "{}; stopped after {} of {} frames (outputs up to there are in {}, summary.json \
-             marked \"complete\": false)",
+            "{}; {progress} (the per-frame outputs hold every one of them, in {}; {summary})",
             semloc::run::outputs::error_chain(f),
-            s.frames_processed,
-            s.frames_requested,
             out.display()
         );
         return Err(super::Exit { code: f.exit_code(), message }.into());
@@ -172,36 +179,47 @@ pub fn finish(outcome: &RunResult, out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The run's report on stdout. Written with one fallible write: a stdout that cannot take it
+/// (a full disk behind `> log`) is a warning, never a panic, and never hides the exit status.
 fn print_summary(s: &Summary, eval: Option<&EvalReport>, out: &Path) {
+    use core::fmt::Write as _;
+    let mut t = String::new();
     let state = if s.complete { String::new() } else { " (incomplete)".to_string() };
-    println!(
+    let _ = writeln!(
+        t,
         "{} of {} frames of {}{state} ({} thread(s))",
         s.frames_processed, s.frames_requested, s.dataset.name, s.threads
     );
-    println!(
+    let _ = writeln!(
+        t,
         "keyframes {}, frames not tracked {} ({} losses), median stereo matches {:.0}, median \
          inliers {:.0}",
         s.keyframes, s.lost, s.losses, s.median_stereo_matches, s.median_inliers
     );
-    println!("core memory {:.1} MiB", s.core_memory_bytes as f64 / 1048576.0);
+    let _ = writeln!(t, "core memory {:.1} MiB", s.core_memory_bytes as f64 / 1048576.0);
     if s.network_memory_bytes > 0 {
-        println!(
+        let _ = writeln!(
+            t,
             "network memory {:.1} MiB (weights + arena + buffers)",
             s.network_memory_bytes as f64 / 1048576.0
         );
     }
-    println!("{:<14}{:>10}{:>10}{:>10}{:>10}", "stage [ms]", "median", "p90", "p99", "max");
+    let _ =
+        writeln!(t, "{:<14}{:>10}{:>10}{:>10}{:>10}", "stage [ms]", "median", "p90", "p99", "max");
     for (k, p) in &s.timing {
-        println!(
+        let _ = writeln!(
+            t,
             "{k:<14}{:>10.2}{:>10.2}{:>10.2}{:>10.2}",
             p.median_ms, p.p90_ms, p.p99_ms, p.max_ms
         );
     }
-    match eval {
-        Some(e) => println!("{e}"),
-        None if s.eval_error.is_some() => println!("not evaluated (see the error below)"),
-        None if s.dataset.has_gt => println!("not evaluated (see the warnings below)"),
-        None => println!("no ground truth for this sequence: trajectory written, not evaluated"),
-    }
-    println!("outputs in {}", out.display());
+    let verdict = match eval {
+        Some(e) => e.to_string(),
+        None if s.eval_error.is_some() => "not evaluated (see the error below)".to_string(),
+        None if s.dataset.has_gt => "not evaluated (see the warnings below)".to_string(),
+        None => "no ground truth for this sequence: trajectory written, not evaluated".to_string(),
+    };
+    let _ = writeln!(t, "{verdict}");
+    let _ = writeln!(t, "outputs in {}", out.display());
+    super::write_stdout(&t);
 }

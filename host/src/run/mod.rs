@@ -242,6 +242,8 @@ pub struct RunResult {
     pub warnings: Vec<String>,
     /// Information worth printing (e.g. how frames are fitted to the network input).
     pub notices: Vec<String>,
+    /// Whether `summary.json` was written (not on a full disk, for instance).
+    pub summary_written: bool,
 }
 
 /// What ended a run early.
@@ -653,6 +655,7 @@ pub fn run_observed(
     let written = outputs::write_json(&out.join("summary.json"), &summary);
     // A summary that cannot be written is an output failure unless the run already failed
     // for a reason that explains it (the same disk, usually).
+    let summary_written = written.is_ok();
     let failure = match (failure, written) {
         (None, Err(e)) => Some(RunFailure::Output(e)),
         (Some(f), Err(e)) => {
@@ -661,5 +664,5 @@ pub fn run_observed(
         }
         (f, Ok(())) => f,
     };
-    Ok(RunResult { frames, summary, eval, failure, eval_error, warnings, notices })
+    Ok(RunResult { frames, summary, eval, failure, eval_error, warnings, notices, summary_written })
 }
