@@ -277,6 +277,11 @@ fn a_full_disk_stops_the_run_with_whole_files_and_a_named_error() {
         assert!(err.contains("error: "), "{err}");
         assert!(err.contains(s(&out)), "the message names the file: {err}");
         assert!(!err.contains("panicked"), "{err}");
+        // The count in the message is the frames the files hold.
+        if let Some(rest) = err.split("stopped after ").nth(1) {
+            let k: usize = rest.split(' ').next().unwrap().parse().unwrap();
+            assert_eq!(k, got.frames, "{err}");
+        }
         if let Some(summary) = got.summary {
             // Written: then it says what went wrong.
             let failed = summary["complete"] == false || !summary["eval_error"].is_null();

@@ -497,11 +497,12 @@ pub fn track_frames(
                     None
                 };
                 let record = FrameRecord { timestamp_s: src.timestamp_s(i), output, moving_check };
-                let written = on_frame(&record);
-                frames.push(record);
-                if let Err(e) = written {
+                // A frame whose lines could not be written is not counted: the records and
+                // the per-frame files always hold the same frames.
+                if let Err(e) = on_frame(&record) {
                     return Tracked { frames, failure: Some(RunFailure::Output(e)) };
                 }
+                frames.push(record);
             }
             Err(e) => return Tracked { frames, failure: Some(RunFailure::Frame(e)) },
         }
