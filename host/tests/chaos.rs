@@ -22,6 +22,13 @@ fn semloc(args: &[&str]) -> Output {
     Command::new(bin()).args(args).output().expect("run semloc")
 }
 
+/// `semloc run` on the shared synthetic sequence into `out`, with `extra` arguments.
+fn run_synth(out: &str, extra: &[&str]) -> Output {
+    let mut args = vec!["run", s(synth_root()), "--seq", "00", "--out", out];
+    args.extend_from_slice(extra);
+    semloc(&args)
+}
+
 fn text(o: &Output) -> (String, String) {
     (
         String::from_utf8_lossy(&o.stdout).into_owned(),
@@ -292,7 +299,7 @@ fn a_full_disk_stops_the_run_with_whole_files_and_a_named_error() {
 
 #[test]
 fn an_unwritable_output_folder_is_an_error_naming_it() {
-    let o = semloc(&["run", s(synth_root()), "--seq", "00", "--out", "/proc/semloc-chaos"]);
+    let o = run_synth("/proc/semloc-chaos", &[]);
     let (_, err) = text(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("/proc/semloc-chaos"), "{err}");
@@ -302,21 +309,15 @@ fn an_unwritable_output_folder_is_an_error_naming_it() {
 fn a_reused_output_folder_is_refused_and_force_replaces_only_what_semloc_wrote() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let run = |frames: &str, extra: &[&str]| {
-        let mut a =
-            vec!["run", s(synth_root()), "--seq", "00", "--out", s(&out), "--max-frames", frames];
-        a.extend_from_slice(extra);
-        semloc(&a)
-    };
-    assert!(run("5", &[]).status.success());
+    assert!(run_synth(s(&out), &["--max-frames", "5"]).status.success());
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
-    let o = run("5", &[]);
+    let o = run_synth(s(&out), &["--max-frames", "5"]);
     let (_, err) = text(&o);
     assert_eq!(o.status.code(), Some(1));
     assert!(err.contains("is not empty") && err.contains("--force"), "{err}");
     // Nothing of the first run was touched.
     assert_eq!(check_outputs(&out).frames, 5);
-    let o = run("4", &["--force"]);
+    let o = run_synth(s(&out), &["--max-frames", "4", "--force"]);
     let (_, err) = text(&o);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("notes.txt"), "the kept file is named: {err}");
@@ -330,18 +331,7 @@ fn a_network_for_another_image_shape_is_refused() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/artefacts/fastscnn_r2_384x480.slm");
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = semloc(&[
-        "run",
-        s(synth_root()),
-        "--seq",
-        "00",
-        "--out",
-        s(&out),
-        "--semantics",
-        "full",
-        "--model",
-        s(&model),
-    ]);
+    let o = run_synth(s(&out), &["--semantics", "full", "--model", s(&model)]);
     let (_, err) = text(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("fastscnn_r2_384x480.slm") && err.contains("480x384"), "{err}");
@@ -352,7 +342,7 @@ fn a_network_for_another_image_shape_is_refused() {
 fn summary_records_provenance() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = semloc(&["run", s(synth_root()), "--seq", "00", "--out", s(&out), "--max-frames", "3"]);
+    let o = run_synth(s(&out), &["--max-frames", "3"]);
     assert!(o.status.success(), "{:?}", text(&o));
     let v = check_outputs(&out).summary.unwrap();
     let p = &v["provenance"];
@@ -578,27 +568,17 @@ fn small_messages_are_right() {
     assert_eq!(o.status.code(), Some(2), "{:?}", text(&o));
     // Two frames: said plainly why there is no evaluation.
     let out = dir.path().join("b");
-    let o = semloc(&["run", s(synth_root()), "--seq", "00", "--out", s(&out), "--max-frames", "2"]);
+    let o = run_synth(s(&out), &["--max-frames", "2"]);
     let (stdout, err) = text(&o);
     assert!(o.status.success(), "{stdout}{err}");
     assert!(err.contains("at least 3"), "{err}");
     assert!(!stdout.contains("no ground truth"), "{stdout}");
     // Values are case-insensitive; a model with --semantics off is a warning, not loaded.
     let out = dir.path().join("c");
-    let o = semloc(&[
-        "run",
-        s(synth_root()),
-        "--seq",
-        "00",
-        "--out",
+    let o = run_synth(
         s(&out),
-        "--max-frames",
-        "3",
-        "--semantics",
-        "Off",
-        "--model",
-        "no-such-model.slm",
-    ]);
+        &["--max-frames", "3", "--semantics", "Off", "--model", "no-such-model.slm"],
+    );
     let (stdout, err) = text(&o);
     assert!(o.status.success(), "{stdout}{err}");
     assert!(err.contains("--model is not used"), "{err}");

@@ -258,16 +258,8 @@ pub fn run(args: &AblateArgs) -> Result<()> {
             seq.root.join("semantic").display()
         );
     }
-    let ours = ablate_outputs();
-    let ours: Vec<&str> = ours.iter().map(String::as_str).collect();
-    let kept = semloc::run::prepare_output_dir(&args.out, args.force, &ours)?;
-    if !kept.is_empty() {
-        super::print_warnings(&[format!(
-            "{} holds files semloc did not write ({}); they were left in place",
-            args.out.display(),
-            kept.join(", ")
-        )]);
-    }
+    let kept = semloc::run::prepare_output_dir(&args.out, args.force, &ablate_outputs())?;
+    super::print_warnings(kept.as_slice());
     let base = || RunConfig {
         max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
         command_line: super::command_line(),

@@ -54,16 +54,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         Some(d) => d.clone(),
         None => std::env::temp_dir().join(format!("semloc-demo-{}", std::process::id())),
     };
-    let ours = super::ablate::ablate_outputs();
-    let ours: Vec<&str> = ours.iter().map(String::as_str).collect();
-    let kept = semloc::run::prepare_output_dir(&out, args.force, &ours)?;
-    if !kept.is_empty() {
-        super::print_warnings(&[format!(
-            "{} holds files semloc did not write ({}); they were left in place",
-            out.display(),
-            kept.join(", ")
-        )]);
-    }
+    let kept = semloc::run::prepare_output_dir(&out, args.force, &super::ablate::ablate_outputs())?;
+    super::print_warnings(kept.as_slice());
     let dynamics = match args.dynamics {
         DynamicsArg::Static => Dynamics::Static,
         DynamicsArg::Low => Dynamics::Low,

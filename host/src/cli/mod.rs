@@ -41,21 +41,10 @@ impl core::fmt::Display for Exit {
 
 impl core::error::Error for Exit {}
 
-/// An error and its causes on one line, `a: b: c`, each said once (a message that already
-/// quotes its cause is not followed by it again).
+/// An error and its causes on one line, `a: b: c`, each said once (see
+/// [`semloc::run::outputs::error_chain`]).
 pub fn error_text(e: &anyhow::Error) -> String {
-    let mut out = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if out.contains(&text) {
-            continue;
-        }
-        if !out.is_empty() {
-            out.push_str(": ");
-        }
-        out.push_str(&text);
-    }
-    out
+    semloc::run::outputs::error_chain(e.as_ref())
 }
 
 /// Prints warnings to stderr, each on its own `warning:` line.

@@ -407,7 +407,8 @@ pub enum RunError {
 /// frames covers 28 % and labels nearly everything one class).
 pub const MIN_INPUT_COVERAGE: f64 = 0.8;
 
-fn list_names(names: &[String]) -> String {
+/// Up to four names, then how many more.
+pub(crate) fn list_names(names: &[String]) -> String {
     let shown: Vec<&str> = names.iter().take(4).map(String::as_str).collect();
     match names.len() {
         n if n > 4 => format!("{}, and {} more", shown.join(", "), n - 4),
@@ -570,14 +571,7 @@ pub fn run_observed(
     let model = pipe.segmenter().map(|s| ModelInfo::of(s, w, h));
     notices.extend(model.as_ref().and_then(|m| letterbox_notice(m, w, h)));
     pipe.set_semantics(semantics.scheme());
-    let kept = prepare_output_dir(&out, force, RUN_OUTPUTS)?;
-    if !kept.is_empty() {
-        warnings.push(format!(
-            "{} holds files semloc did not write ({}); they were left in place",
-            out.display(),
-            list_names(&kept)
-        ));
-    }
+    warnings.extend(prepare_output_dir(&out, force, RUN_OUTPUTS)?);
     let provenance = Provenance {
         semloc_version: provenance::VERSION,
         git_hash: provenance::GIT_HASH,

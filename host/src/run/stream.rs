@@ -145,8 +145,12 @@ pub const RUN_OUTPUTS: &[&str] =
 
 /// Makes `out` ready for a run: created if missing; an empty folder is used as it is. A
 /// non-empty one is refused unless `force`, which removes the entries named in `ours` (and
-/// `.*.tmp` leftovers) and returns the names of anything else, left in place.
-pub fn prepare_output_dir(out: &Path, force: bool, ours: &[&str]) -> Result<Vec<String>, RunError> {
+/// `.*.tmp` leftovers) and leaves anything else in place: the returned warning names it.
+pub fn prepare_output_dir(
+    out: &Path,
+    force: bool,
+    ours: &[impl AsRef<str>],
+) -> Result<Option<String>, RunError> {
     if out.exists() && !out.is_dir() {
         return Err(RunError::OutputFolder {
             path: out.to_path_buf(),
@@ -163,7 +167,7 @@ pub fn prepare_output_dir(out: &Path, force: bool, ours: &[&str]) -> Result<Vec<
         .map_err(listing)?;
     names.sort();
     if names.is_empty() {
-        return Ok(Vec::new());
+        return Ok(None);
     }
     if !force {
         return Err(RunError::OutputNotEmpty { path: out.to_path_buf(), entries: names });
@@ -171,7 +175,7 @@ pub fn prepare_output_dir(out: &Path, force: bool, ours: &[&str]) -> Result<Vec<
     let mut kept = Vec::new();
     for name in names {
         let leftover = name.starts_with('.') && name.ends_with(".tmp");
-        if !ours.contains(&name.as_str()) && !leftover {
+        if !ours.iter().any(|o| o.as_ref() == name) && !leftover {
             kept.push(name);
             continue;
         }
@@ -180,7 +184,13 @@ pub fn prepare_output_dir(out: &Path, force: bool, ours: &[&str]) -> Result<Vec<
             if p.is_dir() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
         removed.map_err(|source| RunError::Write { path: p, source })?;
     }
-    Ok(kept)
+    Ok((!kept.is_empty()).then(|| {
+        format!(
+            "{} holds files semloc did not write ({}); they were left in place",
+            out.display(),
+            super::list_names(&kept)
+        )
+    }))
 }
 
 /// A request to end a run after the current frame. [`StopFlag::register_signals`] makes
