@@ -60,7 +60,7 @@ use crate::orb::{
     KittiOrbExtractor, NoWeights, OrbConfig, OrbError, KITTI_MAX_HEIGHT, KITTI_MAX_WIDTH,
 };
 use crate::seg::{weight_image, WeightScheme};
-use crate::stereo::{KittiStereoMatcher, StereoError, StereoParams, StereoStats};
+use crate::stereo::{KittiStereoMatcher, StereoError, StereoMatching, StereoParams, StereoStats};
 use crate::tracker::{FrameReport, Tracker, TrackerError, TrackerParams};
 
 /// Most pixels of a frame (and of its label and weight images): the extractors' capacity.
@@ -132,6 +132,8 @@ pub struct LocaliserConfig {
     pub height: u32,
     /// ORB extractor settings (both images).
     pub orb: OrbConfig,
+    /// Stereo matching settings (descriptor distance, SAD window and search).
+    pub stereo: StereoMatching,
     /// Tracker settings (association, keyframes, BA).
     pub tracker: TrackerParams,
     /// Semantic weighting of left-image features; `None` is the geometric backbone.
@@ -147,6 +149,7 @@ impl LocaliserConfig {
             width,
             height,
             orb: OrbConfig::KITTI,
+            stereo: StereoMatching::ORB_SLAM2,
             tracker: TrackerParams::default(),
             semantics: None,
         }
@@ -156,7 +159,11 @@ impl LocaliserConfig {
     /// `f32`).
     pub fn stereo_params(&self) -> StereoParams {
         let cam = &self.camera;
-        StereoParams::new((cam.fx_px * cam.baseline_m) as f32, cam.baseline_m as f32)
+        StereoParams::with_matching(
+            (cam.fx_px * cam.baseline_m) as f32,
+            cam.baseline_m as f32,
+            self.stereo,
+        )
     }
 }
 
@@ -261,6 +268,7 @@ impl Localiser {
                 got: (width, height),
             });
         }
+        config.stereo.check().map_err(LocaliserError::Stereo)?;
         let mut tracker = Tracker::new(camera, config.width, config.height, config.tracker)
             .map_err(LocaliserError::Tracker)?;
         tracker.set_motion_aware(config.semantics == Some(WeightScheme::Motion));

@@ -48,6 +48,7 @@ use crate::seg::{category, is_dynamic, Category};
 /// Settings of the motion test.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(default, deny_unknown_fields))]
 pub struct MotionParams {
     /// Prior probability that a vehicle (car, van, truck) is moving.
     pub prior_vehicle: f32,

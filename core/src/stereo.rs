@@ -108,15 +108,59 @@ pub struct StereoParams {
     pub sad_search: i32,
 }
 
+/// The matching settings of [`StereoParams`] that do not come from the rig's geometry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(default, deny_unknown_fields))]
+pub struct StereoMatching {
+    /// A descriptor match needs a Hamming distance below this (bits; ORB-SLAM2: 75).
+    pub max_hamming: u32,
+    /// Half side `w` of the SAD window (px; ORB-SLAM2: 5, an 11 × 11 window),
+    /// 1..=[`MAX_SAD_HALF_WINDOW`].
+    pub sad_half_window: usize,
+    /// Half range `L` of the SAD search in level pixels (ORB-SLAM2: 5), 2..=[`MAX_SAD_SEARCH`].
+    pub sad_search: i32,
+}
+
+impl StereoMatching {
+    /// ORB-SLAM2's values.
+    pub const ORB_SLAM2: StereoMatching =
+        StereoMatching { max_hamming: DEFAULT_MAX_HAMMING, sad_half_window: 5, sad_search: 5 };
+
+    /// Checks the window and search range (what [`StereoMatcher::match_frame`] would refuse).
+    ///
+    /// # Errors
+    /// [`StereoError::BadWindow`] when either is outside its range.
+    pub fn check(&self) -> Result<(), StereoError> {
+        let (w, l) = (self.sad_half_window, self.sad_search);
+        if !(1..=MAX_SAD_HALF_WINDOW).contains(&w) || !(2..=MAX_SAD_SEARCH).contains(&l) {
+            return Err(StereoError::BadWindow { half_window: w, search: l });
+        }
+        Ok(())
+    }
+}
+
+impl Default for StereoMatching {
+    fn default() -> Self {
+        Self::ORB_SLAM2
+    }
+}
+
 impl StereoParams {
     /// ORB-SLAM2's settings for a rig with `bf_px_m` and `baseline_m`.
     pub const fn new(bf_px_m: f32, baseline_m: f32) -> Self {
+        Self::with_matching(bf_px_m, baseline_m, StereoMatching::ORB_SLAM2)
+    }
+
+    /// The settings for a rig with `bf_px_m` and `baseline_m`, matching with `m`.
+    pub const fn with_matching(bf_px_m: f32, baseline_m: f32, m: StereoMatching) -> Self {
         Self {
             bf_px_m,
             baseline_m,
-            max_hamming: DEFAULT_MAX_HAMMING,
-            sad_half_window: 5,
-            sad_search: 5,
+            max_hamming: m.max_hamming,
+            sad_half_window: m.sad_half_window,
+            sad_search: m.sad_search,
         }
     }
 
@@ -524,10 +568,12 @@ fn validate<
     if !(bf.is_finite() && bf > 0.0 && b.is_finite() && b > 0.0) {
         return Err(StereoError::BadCalibration { bf_px_m: bf, baseline_m: b });
     }
-    let (w, l) = (params.sad_half_window, params.sad_search);
-    if !(1..=MAX_SAD_HALF_WINDOW).contains(&w) || !(2..=MAX_SAD_SEARCH).contains(&l) {
-        return Err(StereoError::BadWindow { half_window: w, search: l });
+    StereoMatching {
+        max_hamming: params.max_hamming,
+        sad_half_window: params.sad_half_window,
+        sad_search: params.sad_search,
     }
+    .check()?;
     let n_levels = left_pyr.n_levels();
     if n_levels != right_pyr.n_levels() {
         return Err(StereoError::LevelCountMismatch {

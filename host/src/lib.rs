@@ -14,5 +14,6 @@ pub mod nn;
 pub mod pipeline;
 pub mod plot;
 pub mod run;
+pub mod settings;
 pub mod synth;
 pub mod traj;

@@ -27,6 +27,12 @@ enum Command {
     Eval(cli::eval::EvalArgs),
     /// Describe what a KITTI dataset folder (odometry or raw layout) holds.
     Info(cli::info::InfoArgs),
+    /// The settings file: print the defaults (every key documented), check a file, or convert
+    /// an ORB-SLAM2 YAML file.
+    Config(cli::config::ConfigArgs),
+    /// Write a dataset's ground truth as KITTI poses and TUM (recording times), for evo or the
+    /// devkit.
+    Gt(cli::gt::GtArgs),
     /// Run the stereo tracker on a KITTI sequence; write trajectory, timings and evaluation.
     Run(cli::run::RunArgs),
     /// The main job on an embedded default: a synthetic high-traffic drive tracked without and
@@ -67,6 +73,8 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Eval(args) => cli::eval::run(&args),
         Command::Info(args) => cli::info::run(&args),
+        Command::Gt(args) => cli::gt::run(&args),
+        Command::Config(args) => cli::config::run(&args),
         Command::Run(args) => cli::run::run(&args),
         Command::Ablate(args) => cli::ablate::run(&args),
         Command::Bench(args) => cli::bench::run(&args),

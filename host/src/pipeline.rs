@@ -16,9 +16,9 @@ use semloc_core::localiser::{
     LeftExtraction, Localiser, LocaliserConfig, LocaliserError, RightExtraction,
 };
 use semloc_core::nn::graph::Kernels;
-use semloc_core::orb::KittiOrbExtractor;
+use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
 use semloc_core::seg::WeightScheme;
-use semloc_core::stereo::StereoStats;
+use semloc_core::stereo::{StereoMatching, StereoStats};
 use semloc_core::tracker::{FrameReport, Tracker, TrackerParams};
 
 use std::borrow::Cow;
@@ -296,7 +296,8 @@ struct Prefetch {
 pub const BIG_STACK_BYTES: usize = 256 << 20;
 
 impl Pipeline {
-    /// Builds the pipeline for `calib` and `width`x`height` images.
+    /// Builds the pipeline for `calib` and `width`x`height` images, with ORB-SLAM2's KITTI
+    /// extractor and stereo settings.
     pub fn new(
         calib: &StereoCalib,
         width: u32,
@@ -304,9 +305,34 @@ impl Pipeline {
         tracker_params: TrackerParams,
         threads: usize,
     ) -> Result<Self, PipelineError> {
+        Self::with_settings(
+            calib,
+            width,
+            height,
+            OrbConfig::KITTI,
+            StereoMatching::ORB_SLAM2,
+            tracker_params,
+            threads,
+        )
+    }
+
+    /// [`Pipeline::new`] with the ORB and stereo matching settings given.
+    pub fn with_settings(
+        calib: &StereoCalib,
+        width: u32,
+        height: u32,
+        orb: OrbConfig,
+        stereo: StereoMatching,
+        tracker_params: TrackerParams,
+        threads: usize,
+    ) -> Result<Self, PipelineError> {
         let cam = calib.to_camera().map_err(|e| PipelineError::Calib(e.to_string()))?;
-        let config =
-            LocaliserConfig { tracker: tracker_params, ..LocaliserConfig::new(cam, width, height) };
+        let config = LocaliserConfig {
+            tracker: tracker_params,
+            orb,
+            stereo,
+            ..LocaliserConfig::new(cam, width, height)
+        };
         // Construct the multi-MiB state where a big stack makes the by-value move safe.
         let loc = std::thread::Builder::new()
             .stack_size(BIG_STACK_BYTES)

@@ -44,6 +44,21 @@ fn drive_0005_ate_within_bound_and_deterministic() {
 
     run(RunConfig { threads: 1, ..RunConfig::new(&seq, &out1) });
     assert_same_trajectory(&out2, &out1);
+
+    // TUM times are the recording times of image_02/timestamps.txt (2011-09-26
+    // 13:04:32.345808896 read as UTC is 1317042272.345808896 s), frame by frame.
+    assert!((seq.time_origin_s - 1_317_042_272.345_808_9).abs() < 1e-6, "{}", seq.time_origin_s);
+    let tum = std::fs::read_to_string(out2.join("trajectory_tum.txt")).unwrap();
+    let times: Vec<f64> = tum
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(times.len(), seq.len());
+    for (t, rel) in times.iter().zip(&seq.times_s) {
+        assert!((t - (seq.time_origin_s + rel)).abs() < 1e-6, "{t}");
+    }
+    assert!((times[1] - times[0] - 0.103_379_968).abs() < 1e-6, "{}", times[1] - times[0]);
 }
 
 /// The paper's front end with the committed int8 network: 40 frames of drive 0005 with

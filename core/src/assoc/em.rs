@@ -41,6 +41,7 @@ use crate::semdesc::{self, SemDesc};
 /// Parameters of the E-step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(default, deny_unknown_fields))]
 pub struct EmParams {
     /// EM iterations (E + M) per frame.
     pub iterations: u8,

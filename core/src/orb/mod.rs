@@ -76,6 +76,8 @@ pub const MAX_CELLS: usize = 4096;
 /// How the feature budget is split over the levels (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 pub enum QuotaRule {
     /// ORB-SLAM2's code: geometric with ratio `1/s`.
     OrbSlam2,
@@ -86,6 +88,8 @@ pub enum QuotaRule {
 /// Extraction parameters (ORB-SLAM2's `ORBextractor.*` settings).
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(default, deny_unknown_fields))]
 pub struct OrbConfig {
     /// Features per frame over all levels (`nFeatures`).
     pub n_features: usize,

@@ -41,6 +41,7 @@ use crate::seg::is_dynamic;
 /// Tracker settings; defaults follow ORB-SLAM2's stereo KITTI configuration where it has one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(default, deny_unknown_fields))]
 pub struct TrackerParams {
     /// Stereo points closer than this many baselines are "close" (ORB-SLAM2 `ThDepth` 35).
     pub close_depth_baselines: f64,

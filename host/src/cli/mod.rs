@@ -2,9 +2,11 @@
 
 pub mod ablate;
 pub mod bench;
+pub mod config;
 pub mod convert;
 pub mod demo;
 pub mod eval;
+pub mod gt;
 pub mod info;
 pub mod run;
 pub mod segment;

@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use semloc::eval::EvalReport;
 use semloc::run::{Network, RunConfig, RunResult, Semantics, StopFlag, Summary};
-use semloc_core::tracker::TrackerParams;
+use semloc::settings::Settings;
 
 use super::info::DatasetArgs;
 
@@ -33,18 +33,28 @@ pub struct RunArgs {
     /// cores); 1 runs everything on one thread. Results are identical either way.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
     pub threads: u8,
+    /// Settings file (TOML): camera, ORB, stereo, tracker, EM, motion and semantic parameters
+    /// (`semloc config --print-defaults` prints every key with its unit and default). Flags
+    /// given here override it.
+    #[arg(long, value_name = "FILE", conflicts_with = "orbslam2_settings")]
+    pub config: Option<PathBuf>,
+    /// An ORB-SLAM2 stereo settings file (YAML, e.g. KITTI00-02.yaml): its camera (Camera.fx,
+    /// fy, cx, cy, bf), ThDepth and ORBextractor.* are used; the images must be rectified.
+    #[arg(long, value_name = "FILE")]
+    pub orbslam2_settings: Option<PathBuf>,
     /// RANSAC hypotheses per frame before pose optimisation (0 turns RANSAC off: the pose is
-    /// then optimised from the constant-velocity prediction only).
-    #[arg(long, default_value_t = TrackerParams::default().ransac_iterations, value_name = "N")]
-    pub ransac_iterations: u32,
+    /// then optimised from the constant-velocity prediction only). Default: 100, or the
+    /// settings file's.
+    #[arg(long, value_name = "N")]
+    pub ransac_iterations: Option<u32>,
     /// Semantic weighting of features: `off` (geometric backbone), `cull` (no features on
     /// dynamic classes), `full` (the paper's semantic ORB: cull dynamic, ×3 construction and
     /// object classes), `motion` (as full, but features on cars, pedestrians and cyclists are removed
     /// only where the object is tested moving against the ego-motion). Labels come from the int8 network given with --model, else from the
     /// sequence's `semantic/` folder (ground-truth labels, as `semloc synth` writes them); with
-    /// neither it is an error.
-    #[arg(long, value_enum, ignore_case = true, default_value_t = SemanticsArg::Off)]
-    pub semantics: SemanticsArg,
+    /// neither it is an error. Default: off, or the settings file's.
+    #[arg(long, value_enum, ignore_case = true)]
+    pub semantics: Option<SemanticsArg>,
     /// The segmentation network (`.slm`, from `semloc convert`; e.g.
     /// models/artefacts/fastscnn_r2_192x640.slm) that labels every left frame, pipelined on the
     /// second thread. Used when --semantics is cull, full or motion.
@@ -52,9 +62,10 @@ pub struct RunArgs {
     pub model: Option<PathBuf>,
     /// Data association: `hard` (nearest neighbour in descriptor space, ORB-SLAM2) or `em`
     /// (EM over gated candidates with geometry, ORB, class and semantic-descriptor terms and a
-    /// null hypothesis; class and semantic terms need --semantics).
-    #[arg(long, value_enum, ignore_case = true, default_value_t = AssocArg::Hard)]
-    pub assoc: AssocArg,
+    /// null hypothesis; class and semantic terms need --semantics). Default: hard, or the
+    /// settings file's.
+    #[arg(long, value_enum, ignore_case = true)]
+    pub assoc: Option<AssocArg>,
     /// ATE alignment for the evaluation (see `semloc eval --help`).
     #[arg(long, value_enum, ignore_case = true, default_value_t = super::eval::AlignArg::Se3)]
     pub align: super::eval::AlignArg,
@@ -119,19 +130,47 @@ pub fn run_with_progress(mut cfg: RunConfig<'_>) -> Result<RunResult> {
     result.map_err(Into::into)
 }
 
+/// The settings of `--config` or `--orbslam2-settings` (with notes on what an ORB-SLAM2 file
+/// holds that is not used), or the defaults.
+pub fn load_settings(
+    config: Option<&Path>,
+    orbslam2: Option<&Path>,
+) -> Result<(Settings, Option<PathBuf>, Vec<String>)> {
+    Ok(match (config, orbslam2) {
+        (Some(p), _) => (Settings::from_toml_file(p)?, Some(p.to_path_buf()), Vec::new()),
+        (None, Some(p)) => {
+            let imp = semloc::settings::import_orbslam2(p)?;
+            (imp.settings, Some(p.to_path_buf()), imp.ignored)
+        }
+        (None, None) => (Settings::default(), None, Vec::new()),
+    })
+}
+
 /// Runs `semloc run`.
 pub fn run(args: &RunArgs) -> Result<()> {
+    let (settings, settings_file, ignored) =
+        load_settings(args.config.as_deref(), args.orbslam2_settings.as_deref())?;
+    for n in &ignored {
+        eprintln!("note: {}: {n}", settings_file.as_deref().unwrap_or(Path::new("")).display());
+    }
     let seq = args.data.open()?;
+    let mut tracker = settings.tracker;
+    if let Some(n) = args.ransac_iterations {
+        tracker.ransac_iterations = n;
+    }
+    if let Some(a) = args.assoc {
+        tracker.association = a.into();
+    }
     let cfg = RunConfig {
         max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
         threads: args.threads,
-        tracker: TrackerParams {
-            ransac_iterations: args.ransac_iterations,
-            association: args.assoc.into(),
-            ..TrackerParams::default()
-        },
-        semantics: args.semantics.into(),
-        network: args.model.clone().map(Network::File),
+        tracker,
+        orb: settings.orb,
+        stereo: settings.stereo,
+        camera: settings.camera,
+        settings_file,
+        semantics: args.semantics.map_or(settings.semantics.mode, Into::into),
+        network: args.model.clone().or(settings.semantics.model).map(Network::File),
         align: args.align.into(),
         force: args.force,
         ..RunConfig::new(&seq, &args.out)

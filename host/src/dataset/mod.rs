@@ -109,6 +109,12 @@ pub struct Sequence {
     pub right: Vec<PathBuf>,
     /// Frame times in seconds (odometry: `times.txt`; raw: relative to the first frame).
     pub times_s: Vec<f64>,
+    /// Recording time of `times_s`' zero, in seconds, so that `time_origin_s + times_s[i]` is
+    /// frame `i`'s recording time (what TUM files carry). Raw: the first left-camera timestamp
+    /// as seconds since 1970-01-01 00:00, the civil time of `timestamps.txt` read as UTC.
+    /// Odometry: 0, because `times.txt` already is the recording time from the sequence start
+    /// (KITTI publishes no absolute time for the odometry sequences).
+    pub time_origin_s: f64,
     /// Camera-to-world poses of the left camera of the pair, one per frame, if the dataset has
     /// ground truth. Odometry grey: `poses/XX.txt` as is; odometry colour: the same trajectory
     /// moved to camera 2 (`T₂ G T₂⁻¹`); raw: from OXTS, first pose identity.

@@ -120,6 +120,7 @@ pub(crate) fn open(
         left,
         right,
         times_s,
+        time_origin_s: 0.0,
         gt,
         gt_problem,
         image_size,

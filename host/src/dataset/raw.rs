@@ -103,15 +103,26 @@ pub fn parse_timestamp(path: &Path, line: usize, s: &str) -> Result<(i64, u32), 
 
 /// Reads a raw `timestamps.txt`: seconds relative to the first line.
 pub fn read_timestamps(path: &Path) -> Result<Vec<f64>, DatasetError> {
+    Ok(read_timestamps_with_origin(path)?.1)
+}
+
+/// Reads a raw `timestamps.txt`: the first line's time as seconds since 1970-01-01 00:00 (the
+/// civil time in the file read as UTC; 0 for an empty file) and every line's seconds relative
+/// to it. The relative times keep nanoseconds, which an `f64` of the absolute time would not.
+pub fn read_timestamps_with_origin(path: &Path) -> Result<(f64, Vec<f64>), DatasetError> {
     let text = read_text(path)?;
     let stamps = numbered_lines(&text)
         .map(|(line, l)| parse_timestamp(path, line, l))
         .collect::<Result<Vec<_>, _>>()?;
-    let Some(&(s0, n0)) = stamps.first() else { return Ok(Vec::new()) };
-    Ok(stamps
-        .iter()
-        .map(|&(s, n)| (s - s0) as f64 + (f64::from(n) - f64::from(n0)) * 1e-9)
-        .collect())
+    let Some(&(s0, n0)) = stamps.first() else { return Ok((0.0, Vec::new())) };
+    let origin = s0 as f64 + f64::from(n0) * 1e-9;
+    Ok((
+        origin,
+        stamps
+            .iter()
+            .map(|&(s, n)| (s - s0) as f64 + (f64::from(n) - f64::from(n0)) * 1e-9)
+            .collect(),
+    ))
 }
 
 /// Finds (date folder, drive folder) for `drive` under `root`.
@@ -186,7 +197,8 @@ pub(crate) fn open(
     let calib = stereo_from_projections(cam_to_cam.path(), &pl, &pr)?;
 
     let times_path = cam_dir(l).join("timestamps.txt");
-    let times_s = check_times(&times_path, read_timestamps(&times_path)?, left.len())?;
+    let (time_origin_s, times) = read_timestamps_with_origin(&times_path)?;
+    let times_s = check_times(&times_path, times, left.len())?;
 
     let oxts_dir = drive_dir.join("oxts").join("data");
     let mut gt_problem = None;
@@ -251,6 +263,7 @@ pub(crate) fn open(
         left,
         right,
         times_s,
+        time_origin_s,
         gt,
         gt_problem,
         image_size,

@@ -23,7 +23,9 @@ use std::path::{Path, PathBuf};
 use semloc_core::assoc::Association;
 use semloc_core::geom::Se3;
 use semloc_core::motion::FeatureMotion;
+use semloc_core::orb::OrbConfig;
 use semloc_core::seg::WeightScheme;
+use semloc_core::stereo::StereoMatching;
 use semloc_core::tracker::TrackerParams;
 
 use image::GrayImage;
@@ -33,6 +35,7 @@ use crate::eval::{Align, EvalError, EvalReport};
 use crate::nn::segment::Segmenter;
 use crate::nn::{NnFileError, SlmBlob};
 use crate::pipeline::{FrameOutput, FrameSource, Pipeline, PipelineError};
+use crate::settings::CameraSettings;
 
 pub use outputs::{EvalSummary, MotionSummary, Summary, FRAMES_CSV_HEADER};
 pub use provenance::{ModelInfo, Provenance};
@@ -40,7 +43,8 @@ pub use stats::{percentiles, Percentiles};
 pub use stream::{prepare_output_dir, signal_name, write_atomic, StopFlag, RUN_OUTPUTS};
 
 /// Semantic weighting of left-image features (the paper's §3.1).
-#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Semantics {
     /// No semantics: the geometric backbone.
     #[default]
@@ -101,6 +105,14 @@ pub struct RunConfig<'a> {
     pub threads: u8,
     /// Tracker parameters, the association among them.
     pub tracker: TrackerParams,
+    /// ORB extraction settings.
+    pub orb: OrbConfig,
+    /// Stereo matching settings.
+    pub stereo: StereoMatching,
+    /// The rectified camera, replacing the dataset's calibration (from a settings file).
+    pub camera: Option<CameraSettings>,
+    /// The settings file the configuration came from, for provenance and messages.
+    pub settings_file: Option<PathBuf>,
     /// Semantic weighting.
     pub semantics: Semantics,
     /// The network that labels frames; without one, semantics use the sequence's `semantic/`
@@ -128,6 +140,10 @@ impl<'a> RunConfig<'a> {
             max_frames: None,
             threads: 2,
             tracker: TrackerParams::default(),
+            orb: OrbConfig::KITTI,
+            stereo: StereoMatching::ORB_SLAM2,
+            camera: None,
+            settings_file: None,
             semantics: Semantics::Off,
             network: None,
             align: Align::Se3,
@@ -291,6 +307,21 @@ impl RunResult {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum RunError {
+    /// The settings file's camera is for another image size than the sequence's.
+    #[error(
+        "{}: the camera is {}x{} px but the images are {}x{} ({})",
+        settings.display(), camera.0, camera.1, images.0, images.1, first_image.display()
+    )]
+    CameraSize {
+        /// The settings file.
+        settings: PathBuf,
+        /// `camera.width`, `camera.height`.
+        camera: (u32, u32),
+        /// The images' size.
+        images: (u32, u32),
+        /// The first left image.
+        first_image: PathBuf,
+    },
     /// The output folder could not be created.
     #[error("creating output folder {}", path.display())]
     OutputFolder {
@@ -534,6 +565,10 @@ pub fn run_observed(
         max_frames: _,
         threads,
         tracker,
+        orb,
+        stereo,
+        camera,
+        settings_file,
         semantics,
         network,
         align,
@@ -542,7 +577,20 @@ pub fn run_observed(
         command_line,
     } = cfg;
     let (w, h) = seq.image_size;
-    let mut pipe = Pipeline::new(&seq.calib, w, h, tracker, usize::from(threads))?;
+    if let Some(c) = &camera {
+        let (cw, ch) = (c.width.unwrap_or(w), c.height.unwrap_or(h));
+        if (cw, ch) != (w, h) {
+            return Err(RunError::CameraSize {
+                settings: settings_file.clone().unwrap_or_default(),
+                camera: (cw, ch),
+                images: (w, h),
+                first_image: seq.left.first().cloned().unwrap_or_default(),
+            });
+        }
+    }
+    let calib = camera.as_ref().map_or(seq.calib, CameraSettings::calib);
+    let mut pipe =
+        Pipeline::with_settings(&calib, w, h, orb, stereo, tracker, usize::from(threads))?;
     let mut warnings = Vec::new();
     let mut notices = Vec::new();
     let network = match network {
@@ -587,11 +635,16 @@ pub fn run_observed(
         },
         threads,
         align: align.to_string(),
+        settings_file,
+        camera: calib,
+        camera_from: if camera.is_some() { "settings" } else { "dataset" },
+        orb,
+        stereo,
         tracker,
         model,
     };
 
-    let mut stream = stream::StreamWriter::create(&out)?;
+    let mut stream = stream::StreamWriter::create(&out, seq.time_origin_s)?;
     let Tracked { frames, failure } =
         track_frames(&mut pipe, seq, n, stop.as_ref(), &mut |r: &FrameRecord| {
             stream.append(r)?;

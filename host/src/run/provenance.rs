@@ -39,6 +39,16 @@ pub struct Provenance {
     pub threads: u8,
     /// ATE alignment of the evaluation.
     pub align: String,
+    /// The settings file (`--config` or `--orbslam2-settings`), if one was given.
+    pub settings_file: Option<PathBuf>,
+    /// The rectified camera the run used.
+    pub camera: crate::dataset::StereoCalib,
+    /// Where the camera came from: `dataset` (its calibration files) or `settings`.
+    pub camera_from: &'static str,
+    /// ORB extraction settings.
+    pub orb: semloc_core::orb::OrbConfig,
+    /// Stereo matching settings.
+    pub stereo: semloc_core::stereo::StereoMatching,
     /// Every tracker parameter (association, EM and motion test included).
     pub tracker: TrackerParams,
     /// The network, when one labelled the frames.

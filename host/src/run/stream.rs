@@ -85,18 +85,23 @@ pub struct StreamWriter {
     kitti: LineFile,
     tum: LineFile,
     csv: LineFile,
+    /// Added to each frame's timestamp in `trajectory_tum.txt` (the recording time of the
+    /// source's time zero, [`crate::dataset::Sequence::time_origin_s`]).
+    tum_time_origin_s: f64,
     /// Set once a write failed: nothing more is written (every file stays whole).
     failed: bool,
 }
 
 impl StreamWriter {
     /// Creates `trajectory.txt`, `trajectory_tum.txt` (with its `#` header) and `frames.csv`
-    /// (with its header) in `out`.
-    pub fn create(out: &Path) -> Result<Self, RunError> {
+    /// (with its header) in `out`. TUM lines carry `tum_time_origin_s` plus the frame's time,
+    /// the recording time.
+    pub fn create(out: &Path, tum_time_origin_s: f64) -> Result<Self, RunError> {
         Ok(Self {
             kitti: LineFile::create(out.join("trajectory.txt"), None)?,
             tum: LineFile::create(out.join("trajectory_tum.txt"), Some(crate::traj::TUM_HEADER))?,
             csv: LineFile::create(out.join("frames.csv"), Some(&format!("{FRAMES_CSV_HEADER}\n")))?,
+            tum_time_origin_s,
             failed: false,
         })
     }
@@ -110,7 +115,7 @@ impl StreamWriter {
         let pose = r.output.report.t_wc;
         let lines = [
             crate::traj::format_kitti(&[pose]),
-            crate::traj::format_tum_line(r.timestamp_s, &pose),
+            crate::traj::format_tum_line(self.tum_time_origin_s + r.timestamp_s, &pose),
             super::outputs::frames_csv_row(r),
         ];
         let before = [self.kitti.len, self.tum.len, self.csv.len];
