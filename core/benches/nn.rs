@@ -529,7 +529,7 @@ fn align_vec(bytes: &[u8]) -> Vec<u8> {
 }
 
 fn kernels(c: &mut Criterion) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     {
         use semloc_core::nn::x86::{isa, set_max_isa, Isa};
         match std::env::var("SEMLOC_NN_ISA").as_deref() {

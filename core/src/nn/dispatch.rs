@@ -1,12 +1,15 @@
 //! # dispatch: which fast kernel runs, one function per op family
 //!
 //! The one place that picks the fast kernel of each op family: an instruction-set kernel where
-//! this build and CPU have one (and it takes the op: each returns `false` otherwise), else the
+//! the CPU has one (and it takes the op: each returns `false` otherwise), else the
 //! [`super::portable`] kernel. Every `*_fast` op checks its operands and then calls exactly
-//! one function here. A run-time CPU-feature check (AVX2 on a baseline x86-64 build, NEON dot
-//! products on aarch64, …) belongs in `level` and the arms below, nowhere else.
+//! one function here. The choice is made at run time: every x86-64 build (a baseline one
+//! included) has the `x86` kernels, and `level` is the CPU's best as `x86::isa` probes it
+//! (`cpuid`/`xgetbv`: AVX2, AVX-512 VNNI), `Portable` on a CPU without AVX2 — the x86 entries
+//! also refuse (return `false`) there, so no AVX2 instruction runs on such a CPU. Another
+//! run-time check (NEON dot products on aarch64, …) belongs in `level` and the arms below.
 //!
-//! | family                    | x86-64 with AVX2                         | elsewhere             |
+//! | family                    | x86-64, CPU with AVX2                    | elsewhere             |
 //! |---------------------------|------------------------------------------|-----------------------|
 //! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `portable::conv`      |
 //! | [`depthwise3x3`]          | `x86::depthwise`                         | `portable::depthwise` |
@@ -19,7 +22,7 @@
 //! in tests, per thread by [`for_each_level`], which runs a closure once per level this CPU
 //! has (the shared `kernel_equivalence!` tests use it). **Memory:** none of its own.
 
-#[cfg(all(test, target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(all(test, target_arch = "x86_64"))]
 use core::cell::Cell;
 
 use super::conv::{Conv2dParams, ConvQuant};
@@ -27,31 +30,31 @@ use super::eltwise::{AddQuant, ConcatInput, Rescale};
 use super::pool::{AvgPoolParams, PoolQuant};
 use super::portable;
 use super::resize::ResizeQuant;
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(target_arch = "x86_64")]
 use super::x86::{self, Isa};
 use super::Shape;
 
-#[cfg(all(test, target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(all(test, target_arch = "x86_64"))]
 std::thread_local! {
     /// The highest level the fast kernels may use on this test thread.
     static TEST_CAP: Cell<Isa> = const { Cell::new(Isa::Avx512Vnni) };
 }
 
 /// The cap of this thread (none outside tests).
-#[cfg(all(not(test), target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(all(not(test), target_arch = "x86_64"))]
 #[inline(always)]
 fn thread_cap() -> Isa {
     Isa::Avx512Vnni
 }
 
-#[cfg(all(test, target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(all(test, target_arch = "x86_64"))]
 fn thread_cap() -> Isa {
     TEST_CAP.with(Cell::get)
 }
 
 /// The instruction-set level of this call: the CPU's best, capped by `x86::set_max_isa` (and,
 /// in tests, by the thread's cap).
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(target_arch = "x86_64")]
 #[inline]
 fn level() -> Isa {
     x86::isa().min(thread_cap())
@@ -69,7 +72,7 @@ pub(crate) fn conv2d(
     out: &mut [i8],
     os: Shape,
 ) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::conv1::conv3x3_c1(x, xs, p, w, b, q, out, os) {
         return;
     }
@@ -88,7 +91,7 @@ pub(crate) fn depthwise3x3(
     out: &mut [i8],
     os: Shape,
 ) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::depthwise::depthwise3x3(x, xs, stride, w, b, q, out) {
         return;
     }
@@ -104,7 +107,7 @@ pub(crate) fn pointwise(
     q: &ConvQuant<'_>,
     out: &mut [i8],
 ) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     {
         let level = level();
         let vnni = level == Isa::Avx512Vnni;
@@ -117,7 +120,7 @@ pub(crate) fn pointwise(
 
 /// Bilinear resize (`os`: the output shape).
 pub(crate) fn resize_bilinear(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i8], os: Shape) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::resize::resize_bilinear(x, xs, q, out, os) {
         return;
     }
@@ -126,7 +129,7 @@ pub(crate) fn resize_bilinear(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i
 
 /// `Add` of two same-shaped tensors.
 pub(crate) fn add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::eltwise::add(a, b, shape, q, out) {
         return;
     }
@@ -135,7 +138,7 @@ pub(crate) fn add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]
 
 /// One input of a channel `Concat`, into channels `c0..` of the output of shape `os`.
 pub(crate) fn concat_input(i: &ConcatInput<'_>, c0: usize, os: Shape, out: &mut [i8]) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::eltwise::concat_input(i, c0, os, out) {
         return;
     }
@@ -160,10 +163,11 @@ pub(crate) fn avgpool(
 }
 
 /// Runs `f` once per fast-kernel level this build and CPU have, most capable first, with the
-/// level capped to it on this thread; `f` gets the level's name (tests).
+/// level capped to it on this thread; `f` gets the level's name (tests). Levels the CPU lacks
+/// are skipped (on x86-64 without AVX2 only `portable` runs).
 #[cfg(test)]
 pub(crate) fn for_each_level(mut f: impl FnMut(&'static str)) {
-    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    #[cfg(target_arch = "x86_64")]
     {
         /// Lifts the cap when dropped, also when `f` panics.
         struct Cap;
@@ -175,7 +179,7 @@ pub(crate) fn for_each_level(mut f: impl FnMut(&'static str)) {
         let levels =
             [(Isa::Avx512Vnni, "avx512vnni"), (Isa::Avx2, "avx2"), (Isa::Portable, "portable")];
         for (isa, name) in levels {
-            if isa == Isa::Avx512Vnni && !x86::vnni_available() {
+            if isa > x86::cpu_isa() {
                 continue;
             }
             TEST_CAP.with(|c| c.set(isa));
@@ -183,6 +187,31 @@ pub(crate) fn for_each_level(mut f: impl FnMut(&'static str)) {
             f(name);
         }
     }
-    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    #[cfg(not(target_arch = "x86_64"))]
     f("portable");
+}
+
+#[cfg(all(test, target_arch = "x86_64"))]
+mod tests {
+    use super::*;
+    use std::vec::Vec;
+
+    /// The run-time probe finds what std's detection finds, so the `kernel_equivalence!` tests
+    /// really run the AVX2 (and AVX-512 VNNI) kernels on a CPU that has them.
+    #[test]
+    fn run_time_detection_agrees_with_std() {
+        use std::arch::is_x86_feature_detected as has;
+        let avx2 = has!("avx2");
+        let vnni = has!("avx512f") && has!("avx512bw") && has!("avx512vl") && has!("avx512vnni");
+        assert_eq!(x86::cpu_isa() >= Isa::Avx2, avx2);
+        assert_eq!(x86::vnni_available(), avx2 && vnni);
+        let mut levels = Vec::new();
+        for_each_level(|name| levels.push(name));
+        let want: &[&str] = match (avx2, vnni) {
+            (true, true) => &["avx512vnni", "avx2", "portable"],
+            (true, false) => &["avx2", "portable"],
+            _ => &["portable"],
+        };
+        assert_eq!(levels, want);
+    }
 }

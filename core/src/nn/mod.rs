@@ -10,14 +10,14 @@
 //! that read like the ONNX operator definition, and a `*_fast` kernel that restructures the same
 //! integer arithmetic. Each op file below holds the definition, the checks at entry and the
 //! reference; its `*_fast` entry checks the operands the same way and calls the op family's one
-//! function in `dispatch`, which picks the kernel (the one place a run-time CPU-feature check
-//! would go):
+//! function in `dispatch`, which picks the kernel (the one place of the run-time CPU-feature
+//! checks):
 //! - `portable/`, one file per op family: safe Rust written for the compiler's auto-vectoriser
 //!   (contiguous row slices, hoisted bounds, `chunks_exact`); the code of every target.
 //! - `x86/`, one file per op family (`pointwise`, `depthwise`, `conv1`, `resize`,
-//!   `eltwise`): AVX2 intrinsics on x86-64 (the workspace builds hosts for x86-64-v3), AVX-512
-//!   VNNI for the 1×1 GEMM where the CPU has it, found at run time. The only `unsafe` of the
-//!   crate. An `arm64/` family would sit beside it.
+//!   `eltwise`): AVX2 intrinsics, AVX-512 VNNI for the 1×1 GEMM, compiled into every x86-64
+//!   build (a baseline one included) and used where the CPU has them, found at run time. The
+//!   only `unsafe` of the crate. An `arm64/` family would sit beside it.
 //!
 //! One shared test macro (`kernel_equivalence!`, in `testutil`) runs, per op family, the
 //! reference and the fast kernel at every instruction-set level this CPU has on seeded random
@@ -77,6 +77,10 @@
 //!
 //! (The reference 1×1 kernel reads the packed weights through an index function, so its time
 //! is not comparable with the O·I reference of before; "before" is the previous fast kernels.)
+//! The portable column was measured when hosts were built for x86-64-v3; they now build for
+//! baseline x86-64 and pick the AVX2/VNNI kernels at run time (same times), and the portable
+//! kernels — run on x86 only by a CPU without AVX2 or under `SEMLOC_NN_ISA=portable` — are
+//! ~1.55× slower there (whole graph 61 → 95 ms, measured back to back).
 //! tract-onnx f32 on one thread takes ~45 ms for the same model on this machine (`semloc bench
 //! --seg-only`, median), so the int8 graph is ~6–7× faster. The GEMM reaches 140–180 GMAC/s for
 //! 128–592 input channels and 75 GMAC/s for 32, where the per-output requantisation (14 vector
@@ -95,12 +99,12 @@ pub mod quant;
 pub mod resize;
 #[cfg(test)]
 mod testutil;
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(target_arch = "x86_64")]
 pub mod x86;
 
 /// The x86 instruction-set cap ([`x86::set_max_isa`], [`x86::Isa`]) under its former path, for
 /// the callers that name it (`tests/tests/segmentation.rs`).
-#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[cfg(target_arch = "x86_64")]
 pub use x86 as simd;
 
 pub use quant::Requant;

@@ -7,20 +7,21 @@
 //! The 9 taps as five `i16` pairs broadcast into `vpmaddwd` per 8 output channels; with
 //! stride 2, eight pixels' pairs come from 16-byte row loads.
 //!
-//! **ISA:** AVX2 (compile-time). **Stack:** 3 KiB of per-group constants (8 groups of 8 output
-//! channels; more channels take several passes).
+//! **ISA:** AVX2 (detected at run time: [`super::Avx2`]). **Stack:** 3 KiB of per-group constants
+//! (8 groups of 8 output channels; more channels take several passes).
 
 use core::arch::x86_64::*;
 
 use super::lanes::{finish8, from_slice, pack32, store8, Rq8};
+use super::Avx2;
 use crate::nn::conv::{Conv2dParams, ConvQuant};
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::{Requant, Shape};
 
 /// The general conv on operands [`crate::nn::conv::conv2d_fast`] has checked (`os` the output
-/// shape), when it is a 3×3 conv of a one-channel map. `false`, with nothing written, for any
-/// other geometry or when the accumulators could leave the range of the vector requantisation
-/// ([`fits_simd_requant`]).
+/// shape), when it is a 3×3 conv of a one-channel map. `false`, with nothing written, on a CPU
+/// without AVX2, for any other geometry or when the accumulators could leave the range of the
+/// vector requantisation ([`fits_simd_requant`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn conv3x3_c1(
     x: &[i8],
@@ -32,6 +33,9 @@ pub(crate) fn conv3x3_c1(
     out: &mut [i8],
     os: Shape,
 ) -> bool {
+    let Some(avx2) = Avx2::get() else {
+        return false;
+    };
     if xs.c != 1 || p.kernel != (3, 3) || !fits_simd_requant(9 * 255 * 127, b, q.requant) {
         return false;
     }
@@ -51,7 +55,7 @@ pub(crate) fn conv3x3_c1(
         zo: q.output_zero_point,
         lo,
     };
-    run(&a, out);
+    run(&a, out, avx2);
     true
 }
 
@@ -96,7 +100,7 @@ const TAP_PAIRS: [(usize, usize); 5] = [(0, 1), (3, 4), (6, 7), (2, 5), (8, 9)];
 /// five `i16` pairs ([`TAP_PAIRS`]), each broadcast and multiplied into every 8-channel group
 /// with `vpmaddwd` against the matching weight pairs. With stride 2, runs of 8 interior pixels
 /// get their pairs from six 16-byte row loads (bytes `2i, 2i + 1` are pixel `i`'s `kx = 0, 1`).
-fn run(a: &Conv1<'_>, out: &mut [i8]) {
+fn run(a: &Conv1<'_>, out: &mut [i8], _avx2: Avx2) {
     let n = a.bias.len();
     assert!(
         a.x.len() >= a.h * a.w
@@ -105,7 +109,7 @@ fn run(a: &Conv1<'_>, out: &mut [i8]) {
             && out.len() >= a.oh * a.ow * n,
         "conv operands checked by the caller"
     );
-    // SAFETY: AVX2 is enabled for the whole build; ranges asserted above
+    // SAFETY: AVX2 detected at run time (the `Avx2` token); ranges asserted above
     unsafe { conv1_avx2(a, out) }
 }
 

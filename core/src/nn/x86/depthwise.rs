@@ -7,19 +7,20 @@
 //! 8 channels per vector. Interior pixels sum raw bytes from `bias − zp·Σw`, taps interleaved
 //! in pairs into `vpmaddwd`; border pixels `(x − zp)·w` over their valid taps.
 //!
-//! **ISA:** AVX2 (compile-time). **Stack:** 21 KiB of per-group constants (32 groups of 8
-//! channels; wider layers take several passes over the pixels).
+//! **ISA:** AVX2 (detected at run time: [`super::Avx2`]). **Stack:** 21 KiB of per-group constants
+//! (32 groups of 8 channels; wider layers take several passes over the pixels).
 
 use core::arch::x86_64::*;
 
 use super::lanes::{finish8, from_slice, load8, load_n, pack32, store8, Rq8};
+use super::Avx2;
 use crate::nn::conv::ConvQuant;
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::{Requant, Shape};
 
-/// The depthwise 3×3 conv on operands [`crate::nn::conv::depthwise3x3_fast`] has checked.
-/// `false`, with nothing written, when the accumulators could leave the range of the vector
-/// requantisation ([`fits_simd_requant`]).
+/// The depthwise 3×3 conv on operands [`crate::nn::conv::depthwise3x3_fast`] has checked. `false`,
+/// with nothing written, on a CPU without AVX2 or when the accumulators could leave the range of
+/// the vector requantisation ([`fits_simd_requant`]).
 pub(crate) fn depthwise3x3(
     x: &[i8],
     xs: Shape,
@@ -29,6 +30,9 @@ pub(crate) fn depthwise3x3(
     q: &ConvQuant<'_>,
     out: &mut [i8],
 ) -> bool {
+    let Some(avx2) = Avx2::get() else {
+        return false;
+    };
     if !fits_simd_requant(9 * 255 * 127, b, q.requant) {
         return false;
     }
@@ -46,7 +50,7 @@ pub(crate) fn depthwise3x3(
         zo: q.output_zero_point,
         lo,
     };
-    run(&a, out);
+    run(&a, out, avx2);
     true
 }
 
@@ -99,7 +103,7 @@ const DW_GROUPS: usize = 32;
 /// raw inputs of all 9 taps on top of `bias − zp·Σw`; border pixels sum `(x − zp)·w` over
 /// their valid taps from `bias`. Groups of four full groups are packed and stored as 32 bytes.
 /// `out` is `oh × ow × c`.
-fn run(a: &Dw<'_>, out: &mut [i8]) {
+fn run(a: &Dw<'_>, out: &mut [i8], _avx2: Avx2) {
     let oh = (a.h - 1) / a.stride + 1;
     let ow = (a.w - 1) / a.stride + 1;
     assert!(
@@ -110,7 +114,7 @@ fn run(a: &Dw<'_>, out: &mut [i8]) {
             && out.len() >= oh * ow * a.c,
         "depthwise operands checked by the caller"
     );
-    // SAFETY: AVX2 is enabled for the whole build; ranges asserted above
+    // SAFETY: AVX2 detected at run time (the `Avx2` token); ranges asserted above
     unsafe { dw_avx2(a, out, oh, ow) }
 }
 

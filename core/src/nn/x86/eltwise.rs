@@ -7,19 +7,23 @@
 //!   `clamp(zo + M(x − zp))`, as [`crate::nn::eltwise::concat_reference`] (identity rescales
 //!   are plain copies, left to the portable kernel).
 //!
-//! **ISA:** AVX2 (compile-time). **Stack:** a few vectors of constants.
+//! **ISA:** AVX2 (detected at run time: [`super::Avx2`]). **Stack:** a few vectors of constants.
 
 use core::arch::x86_64::*;
 
 use super::lanes::{finish8, load8, load_n, pack32, rdbpot8, store8, Rq8};
+use super::Avx2;
 use crate::nn::eltwise::{AddQuant, ConcatInput};
 use crate::nn::quant::{clamp_range, fits_simd_requant, ADD_LEFT_SHIFT};
 use crate::nn::{Requant, Shape};
 
 /// `Add` on operands [`crate::nn::eltwise::add_fast`] has checked. `false`, with nothing
-/// written, when an input requantiser shifts left or the sums could leave the range of the
-/// vector requantisation ([`fits_simd_requant`]).
+/// written, on a CPU without AVX2, when an input requantiser shifts left or the sums could
+/// leave the range of the vector requantisation ([`fits_simd_requant`]).
 pub(crate) fn add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]) -> bool {
+    let Some(avx2) = Avx2::get() else {
+        return false;
+    };
     let x = 255i64 << ADD_LEFT_SHIFT;
     let left = q.requant1.shift.max(q.requant2.shift).clamp(0, 30);
     if !(q.requant1.shift <= 0
@@ -40,15 +44,18 @@ pub(crate) fn add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]
         zo: q.output_zero_point,
         lo,
     };
-    run_add(&op, &mut out[..n]);
+    run_add(&op, &mut out[..n], avx2);
     true
 }
 
 /// One input of a channel `Concat` on operands [`crate::nn::eltwise::concat_fast`] has
 /// checked, rescaled into channels `c0..` of the output of shape `os`. `false`, with nothing
-/// written, for an identity rescale (a copy) or a requantiser outside the range of the vector
-/// requantisation ([`fits_simd_requant`]).
+/// written, on a CPU without AVX2, for an identity rescale (a copy) or a requantiser outside
+/// the range of the vector requantisation ([`fits_simd_requant`]).
 pub(crate) fn concat_input(i: &ConcatInput<'_>, c0: usize, os: Shape, out: &mut [i8]) -> bool {
+    let Some(avx2) = Avx2::get() else {
+        return false;
+    };
     if i.rescale.is_identity() || !fits_simd_requant(255, &[], &[i.rescale.requant]) {
         return false;
     }
@@ -60,7 +67,7 @@ pub(crate) fn concat_input(i: &ConcatInput<'_>, c0: usize, os: Shape, out: &mut 
         zo: i.rescale.output_zero_point,
         requant: i.rescale.requant,
     };
-    run_rescale(&op, os.h * os.w, &mut out[c0..os.len()]);
+    run_rescale(&op, os.h * os.w, &mut out[c0..os.len()], avx2);
     true
 }
 
@@ -85,7 +92,7 @@ struct AddOp<'a> {
 /// TFLite's quantised add, 8 lanes at a time: `clamp(zo + Mo(M1((a − za) << 20) + M2((b − zb)
 /// << 20)))`. `out.len()` elements. The input requantisers must have no left shift (scales
 /// `≤ 1/2`, which TFLite's construction guarantees).
-fn run_add(op: &AddOp<'_>, out: &mut [i8]) {
+fn run_add(op: &AddOp<'_>, out: &mut [i8], _avx2: Avx2) {
     assert!(
         op.a.len() >= out.len()
             && op.b.len() >= out.len()
@@ -93,7 +100,7 @@ fn run_add(op: &AddOp<'_>, out: &mut [i8]) {
             && op.rq.1.shift <= 0,
         "add operands checked"
     );
-    // SAFETY: AVX2 is enabled for the whole build; ranges asserted above
+    // SAFETY: AVX2 detected at run time (the `Avx2` token); ranges asserted above
     unsafe { add_avx2(op, out) }
 }
 
@@ -157,13 +164,13 @@ struct RescaleOp<'a> {
 }
 
 /// [`RescaleOp`], AVX2. `out` starts at the input's first output channel.
-fn run_rescale(op: &RescaleOp<'_>, pixels: usize, out: &mut [i8]) {
+fn run_rescale(op: &RescaleOp<'_>, pixels: usize, out: &mut [i8], _avx2: Avx2) {
     assert!(
         op.x.len() >= pixels * op.c
             && (pixels == 0 || out.len() >= (pixels - 1) * op.stride + op.c),
         "rescale operands checked"
     );
-    // SAFETY: AVX2 is enabled for the whole build; ranges asserted above
+    // SAFETY: AVX2 detected at run time (the `Avx2` token); ranges asserted above
     unsafe { rescale_avx2(op, pixels, out) }
 }
 

@@ -16,22 +16,22 @@
 //!   adjacent lanes, added by one `vphaddd` at the end); start `bias − zp·Σw`. Tiles of 6
 //!   pixels × 8 channels.
 //!
-//! **ISA:** AVX2 (compile-time); AVX-512 F/BW/VL + VNNI for the VNNI form (probed at run time,
-//! [`super::vnni_available`]). **Stack:** the AVX2 form a 12 KiB staged `i16` input tile and
-//! 7 KiB of per-block constants, the VNNI form an 8 KiB staged `u8` tile; rows wider than 1024
-//! channels are read in place instead.
+//! **ISA:** AVX2 (detected at run time: [`super::Avx2`]); AVX-512 F/BW/VL + VNNI for the VNNI form
+//! (probed at run time, [`super::vnni_available`]). **Stack:** the AVX2 form a 12 KiB staged `i16`
+//! input tile and 7 KiB of per-block constants, the VNNI form an 8 KiB staged `u8` tile; rows wider
+//! than 1024 channels are read in place instead.
 
 use core::arch::x86_64::*;
 
 use super::lanes::{finish8, store8, store8_avx512, Rq8};
-use super::vnni_available;
+use super::{vnni_available, Avx2};
 use crate::nn::conv::ConvQuant;
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::{Requant, Shape};
 
 /// The 1×1 conv on operands [`crate::nn::conv::pointwise_fast`] has checked: VNNI when `vnni`
-/// (and the CPU has it), else AVX2. `false`, with nothing written, when the accumulators could
-/// leave the range of the vector requantisation ([`fits_simd_requant`]).
+/// (and the CPU has it), else AVX2. `false`, with nothing written, on a CPU without AVX2 or when
+/// the accumulators could leave the range of the vector requantisation ([`fits_simd_requant`]).
 pub(crate) fn pointwise(
     x: &[i8],
     xs: Shape,
@@ -41,6 +41,9 @@ pub(crate) fn pointwise(
     out: &mut [i8],
     vnni: bool,
 ) -> bool {
+    let Some(avx2) = Avx2::get() else {
+        return false;
+    };
     if !fits_simd_requant(xs.c as i64 * 255 * 127, b, q.requant) {
         return false;
     }
@@ -56,7 +59,7 @@ pub(crate) fn pointwise(
         zo: q.output_zero_point,
         lo,
     };
-    run(&a, out, vnni);
+    run(&a, out, vnni, avx2);
     true
 }
 
@@ -108,7 +111,7 @@ unsafe fn tail_quad(p: *const i8, n: usize) -> i32 {
 
 /// `out[p][c] = requant(bias[c] + Σ_k (x[p][k] − zp)·w[c][k])` for all pixels and channels:
 /// VNNI when `vnni` and the CPU has it, else AVX2. `out` holds `p × n` bytes, `n = bias.len()`.
-fn run(a: &Pw<'_>, out: &mut [i8], vnni: bool) {
+fn run(a: &Pw<'_>, out: &mut [i8], vnni: bool, _avx2: Avx2) {
     let n = a.bias.len();
     let panel = a.k.div_ceil(4) * 32;
     assert!(
@@ -122,7 +125,7 @@ fn run(a: &Pw<'_>, out: &mut [i8], vnni: bool) {
         // SAFETY: VNNI + AVX-512 VL/BW/F probed at run time; ranges asserted above
         unsafe { pw_vnni(a, out) }
     } else {
-        // SAFETY: AVX2 is enabled for the whole build (this module's cfg); ranges asserted
+        // SAFETY: AVX2 detected at run time (the `Avx2` token); ranges asserted above
         unsafe { pw_avx2(a, out) }
     }
 }

@@ -7,21 +7,22 @@
 //! Separable: each source row blended in `x` once per chunk of output columns, each output row
 //! one flat run of `s + wy·d` over the chunk (no lanes lost to 11 channels).
 //!
-//! **ISA:** AVX2 (compile-time). **Stack:** 16 KiB of staged row chunks and 24 KiB of column
-//! taps; outputs wider than [`RESIZE_MAX_OW`] or with more than [`RESIZE_MAX_C`] channels are
-//! left to the portable kernel.
+//! **ISA:** AVX2 (detected at run time: [`super::Avx2`]). **Stack:** 16 KiB of staged row chunks
+//! and 24 KiB of column taps; outputs wider than [`RESIZE_MAX_OW`] or with more than
+//! [`RESIZE_MAX_C`] channels are left to the portable kernel.
 
 use core::arch::x86_64::*;
 
 use super::lanes::{finish8, load8, load_n, pack32, store8, Rq8};
+use super::Avx2;
 use crate::nn::quant::fits_simd_requant;
 use crate::nn::resize::{half_pixel_taps, ResizeQuant, RESIZE_FRAC_BITS};
 use crate::nn::{Requant, Shape};
 
-/// The resize on operands [`crate::nn::resize::resize_bilinear_fast`] has checked (`os` the
-/// output shape). `false`, with nothing written, when the output is wider than
-/// [`RESIZE_MAX_OW`], has more than [`RESIZE_MAX_C`] channels, or the requantiser leaves the
-/// range of the vector requantisation ([`fits_simd_requant`]).
+/// The resize on operands [`crate::nn::resize::resize_bilinear_fast`] has checked (`os` the output
+/// shape). `false`, with nothing written, on a CPU without AVX2, when the output is wider than
+/// [`RESIZE_MAX_OW`], has more than [`RESIZE_MAX_C`] channels, or the requantiser leaves the range
+/// of the vector requantisation ([`fits_simd_requant`]).
 pub(crate) fn resize_bilinear(
     x: &[i8],
     xs: Shape,
@@ -29,6 +30,9 @@ pub(crate) fn resize_bilinear(
     out: &mut [i8],
     os: Shape,
 ) -> bool {
+    let Some(avx2) = Avx2::get() else {
+        return false;
+    };
     if xs.c > RESIZE_MAX_C
         || os.w > RESIZE_MAX_OW
         || !fits_simd_requant(255 << (2 * RESIZE_FRAC_BITS), &[], &[q.requant])
@@ -46,7 +50,7 @@ pub(crate) fn resize_bilinear(
         zo: q.output_zero_point,
         requant: q.requant,
     };
-    run(&a, out);
+    run(&a, out, avx2);
     true
 }
 
@@ -86,7 +90,7 @@ struct Rs<'a> {
 /// `s + wy·d` (= `(2^11 − wy)·h0 + wy·h1`, the reference's integer) over the chunk as one flat
 /// run of values — no lanes wasted on channel counts like 11 — requantised 8 at a time and
 /// stored 32 bytes at a time. `|s|, |d·wy| < 2^31`: nothing overflows.
-fn run(a: &Rs<'_>, out: &mut [i8]) {
+fn run(a: &Rs<'_>, out: &mut [i8], _avx2: Avx2) {
     assert!(
         a.x.len() >= a.h * a.w * a.c
             && a.c <= RESIZE_MAX_C
@@ -94,7 +98,7 @@ fn run(a: &Rs<'_>, out: &mut [i8]) {
             && out.len() >= a.oh * a.ow * a.c,
         "resize operands checked by the caller"
     );
-    // SAFETY: AVX2 is enabled for the whole build; ranges asserted above
+    // SAFETY: AVX2 detected at run time (the `Avx2` token); ranges asserted above
     unsafe { resize_avx2(a, out) }
 }
 
