@@ -47,7 +47,7 @@ fn drive_0005_ate_within_bound_and_deterministic() {
 
     // TUM times are the recording times of image_02/timestamps.txt (2011-09-26
     // 13:04:32.345808896 read as UTC is 1317042272.345808896 s), frame by frame.
-    assert!((seq.time_origin_s - 1_317_042_272.345_808_9).abs() < 1e-6, "{}", seq.time_origin_s);
+    assert!((seq.time_origin_s - 1_317_042_272.345_809).abs() < 1e-6, "{}", seq.time_origin_s);
     let tum = std::fs::read_to_string(out2.join("trajectory_tum.txt")).unwrap();
     let times: Vec<f64> = tum
         .lines()
