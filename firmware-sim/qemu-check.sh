@@ -45,7 +45,7 @@ qemu_rc=0
 # Semihosting output goes to a file chardev: without one QEMU picks stdout or stderr
 # depending on how its own stdio is set up.
 : >"$WORK/qemu.txt"
-timeout "$TIMEOUT_S" "$QEMU" -M virt -cpu cortex-a72 -m 256M -nographic -monitor none \
+timeout "$TIMEOUT_S" "$QEMU" -M virt -cpu cortex-a72 -m 512M -nographic -monitor none \
   -chardev "file,id=semihost,path=$WORK/qemu.txt" \
   -semihosting-config enable=on,target=native,chardev=semihost -kernel "$IMG" \
   </dev/null >"$WORK/qemu.log" 2>&1 || qemu_rc=$?
@@ -58,7 +58,7 @@ grep '^@' "$WORK/qemu.txt" || true
 tr -d '\r' <"$WORK/qemu.txt" | grep -v '^@' >"$WORK/qemu.cmp" || true
 grep -v '^@' "$WORK/host.txt" >"$WORK/host.cmp" || true
 
-echo "== sizes (bytes; aarch64 'other' is the 64 MiB NOLOAD stack)"
+echo "== sizes (bytes; aarch64 'other' is the 320 MiB NOLOAD stack)"
 python3 firmware-sim/elf_sizes.py "$PROBE" "$IMG"
 
 echo "== result"

@@ -17,7 +17,7 @@
 //! use semloc_core::seg::WeightScheme;
 //! # fn main() {
 //! #     // ≈ 11 MiB by value: more than a main thread's default stack.
-//! #     let t = std::thread::Builder::new().stack_size(256 << 20).spawn(run).unwrap();
+//! #     let t = std::thread::Builder::new().stack_size(1 << 30).spawn(run).unwrap();
 //! #     t.join().unwrap();
 //! # }
 //! # fn run() {

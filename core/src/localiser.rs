@@ -20,7 +20,7 @@
 //! in `firmware-sim` is the regression test.
 //!
 //! Memory: one [`Localiser`] holds all of its working memory ([`Localiser::MEMORY_BYTES`],
-//! ≈ 11 MiB: the tracker, two extractors with their pyramids, the stereo matcher, one frame,
+//! ≈ 41 MiB: the tracker, two extractors with their pyramids, the stereo matcher, one frame,
 //! and a label and a weight image of [`MAX_PIXELS`] each); nothing is allocated per frame. It
 //! is returned by value from [`Localiser::new`]: build it where a move of that size is safe (a
 //! `static` on a target, a `Box` on a big-stack thread on a host). The optional [`Network`]
@@ -33,7 +33,7 @@
 //! # fn run() -> Result<(), semloc_core::localiser::LocaliserError> {
 //! let (w, h) = (320usize, 96usize);
 //! let cam = StereoCamera::new(180.0, 180.0, 160.0, 48.0, 0.54).expect("camera");
-//! // ≈ 11 MiB: box it on the host (a `static` on a target).
+//! // ≈ 41 MiB: box it on the host (a `static` on a target).
 //! let mut loc = Box::new(Localiser::new(&LocaliserConfig::new(cam, w as u32, h as u32))?);
 //! // A textured left image and the same scene 8 px further left in the right image.
 //! let tex = |x: usize, y: usize| ((x * 7 + y * 13) ^ (x * y / 5)) as u8;
@@ -44,8 +44,8 @@
 //! assert!(out.report.t_wc.trans.norm() < 1e-9); // the first frame defines the world
 //! # Ok(()) }
 //! # fn main() {
-//! #     // ≈ 11 MiB by value: more than a main thread's default stack.
-//! #     let t = std::thread::Builder::new().stack_size(256 << 20).spawn(run).unwrap();
+//! #     // ≈ 41 MiB by value: more than a main thread's default stack.
+//! #     let t = std::thread::Builder::new().stack_size(1 << 30).spawn(run).unwrap();
 //! #     t.join().unwrap().unwrap();
 //! # }
 //! ```
@@ -57,14 +57,14 @@ use crate::image::{ImageError, ImageView, ImageViewMut};
 use crate::nn::graph::{self, Kernels, Letterbox, SegBuffers};
 use crate::nn::model::{Model, ModelError};
 use crate::orb::{
-    KittiOrbExtractor, NoWeights, OrbConfig, OrbError, KITTI_MAX_HEIGHT, KITTI_MAX_WIDTH,
+    FrameOrbExtractor, NoWeights, OrbConfig, OrbError, MAX_FRAME_HEIGHT, MAX_FRAME_WIDTH,
 };
 use crate::seg::{weight_image, WeightScheme};
-use crate::stereo::{KittiStereoMatcher, StereoError, StereoMatching, StereoParams, StereoStats};
+use crate::stereo::{FrameStereoMatcher, StereoError, StereoMatching, StereoParams, StereoStats};
 use crate::tracker::{FrameReport, Tracker, TrackerError, TrackerParams};
 
 /// Most pixels of a frame (and of its label and weight images): the extractors' capacity.
-pub const MAX_PIXELS: usize = KITTI_MAX_WIDTH * KITTI_MAX_HEIGHT;
+pub const MAX_PIXELS: usize = MAX_FRAME_WIDTH * MAX_FRAME_HEIGHT;
 
 /// Why the localiser could not be built or could not process a frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -126,9 +126,9 @@ impl core::error::Error for LocaliserError {}
 pub struct LocaliserConfig {
     /// The rectified stereo camera (left camera intrinsics and baseline).
     pub camera: StereoCamera,
-    /// Image width (px), at most [`KITTI_MAX_WIDTH`].
+    /// Image width (px), at most [`MAX_FRAME_WIDTH`].
     pub width: u32,
-    /// Image height (px); `width · height` at most [`MAX_PIXELS`].
+    /// Image height (px), at most [`MAX_FRAME_HEIGHT`].
     pub height: u32,
     /// ORB extractor settings (both images).
     pub orb: OrbConfig,
@@ -180,9 +180,9 @@ pub struct FrameOutput {
 
 /// The stereo localisation pipeline in fixed memory (see the module docs).
 pub struct Localiser {
-    left: KittiOrbExtractor,
-    right: KittiOrbExtractor,
-    stereo: KittiStereoMatcher,
+    left: FrameOrbExtractor,
+    right: FrameOrbExtractor,
+    stereo: FrameStereoMatcher,
     frame: Frame,
     tracker: Tracker,
     config: LocaliserConfig,
@@ -238,10 +238,12 @@ fn check_size(img: &ImageView<'_>, size: (usize, usize)) -> Result<(), Localiser
     Ok(())
 }
 
-/// Memory budget of one [`Localiser`] (bytes), checked at compile time: of the ECU's 32 MiB for
-/// the localisation stack, 26 MiB for the pipeline, most of it the tracker's persistent map
+/// Memory budget of one [`Localiser`] (bytes), checked at compile time: of the ECU's 48 MiB for
+/// the localisation stack, 44 MiB for the pipeline — ≈ 23 MiB of frame-sized buffers for frames
+/// up to [`MAX_FRAME_WIDTH`] × [`MAX_FRAME_HEIGHT`] (two pyramids and scratches, labels, weights),
+/// most of the rest the tracker's persistent map
 /// (the network's ≈ 2.5 MiB arena comes on top).
-pub const LOCALISER_BUDGET_BYTES: usize = 26 << 20;
+pub const LOCALISER_BUDGET_BYTES: usize = 44 << 20;
 const _: () = assert!(core::mem::size_of::<Localiser>() <= LOCALISER_BUDGET_BYTES);
 
 impl Localiser {
@@ -262,9 +264,9 @@ impl Localiser {
             .map_err(LocaliserError::Camera)?;
         let config = LocaliserConfig { camera, ..*config };
         let (width, height) = (config.width as usize, config.height as usize);
-        if width > KITTI_MAX_WIDTH || width * height > MAX_PIXELS {
+        if width > MAX_FRAME_WIDTH || height > MAX_FRAME_HEIGHT {
             return Err(LocaliserError::FrameSize {
-                expected: (KITTI_MAX_WIDTH, KITTI_MAX_HEIGHT),
+                expected: (MAX_FRAME_WIDTH, MAX_FRAME_HEIGHT),
                 got: (width, height),
             });
         }
@@ -276,9 +278,9 @@ impl Localiser {
         // matcher and frame have `const fn new`); configured afterwards, so no multi-MiB
         // temporaries are moved around.
         let mut loc = Self {
-            left: KittiOrbExtractor::new(),
-            right: KittiOrbExtractor::new(),
-            stereo: KittiStereoMatcher::new(),
+            left: FrameOrbExtractor::new(),
+            right: FrameOrbExtractor::new(),
+            stereo: FrameStereoMatcher::new(),
             frame: Frame::new(),
             tracker,
             config,
@@ -520,7 +522,7 @@ impl Localiser {
     }
 
     /// The left extractor (its last features and statistics).
-    pub fn left_extractor(&self) -> &KittiOrbExtractor {
+    pub fn left_extractor(&self) -> &FrameOrbExtractor {
         &self.left
     }
 }
@@ -528,7 +530,7 @@ impl Localiser {
 /// The left-image extraction stage, borrowed from a [`Localiser`] with the frame's labels
 /// (`Send`: run it on any thread).
 pub struct LeftExtraction<'a> {
-    ex: &'a mut KittiOrbExtractor,
+    ex: &'a mut FrameOrbExtractor,
     sem: &'a mut SemanticImages,
     scheme: Option<WeightScheme>,
     size: (usize, usize),
@@ -571,14 +573,14 @@ impl LeftExtraction<'_> {
     }
 
     /// The extractor (its last features).
-    pub fn extractor(&self) -> &KittiOrbExtractor {
+    pub fn extractor(&self) -> &FrameOrbExtractor {
         self.ex
     }
 }
 
 /// The right-image extraction stage, borrowed from a [`Localiser`] (`Send`).
 pub struct RightExtraction<'a> {
-    ex: &'a mut KittiOrbExtractor,
+    ex: &'a mut FrameOrbExtractor,
     size: (usize, usize),
 }
 
@@ -593,7 +595,7 @@ impl RightExtraction<'_> {
 }
 
 fn extract<M: crate::orb::WeightMap + ?Sized>(
-    ex: &mut KittiOrbExtractor,
+    ex: &mut FrameOrbExtractor,
     img: &ImageView<'_>,
     size: (usize, usize),
     weights: &M,

@@ -74,7 +74,7 @@ use crate::image::ImageView;
 use crate::math;
 use crate::orb::{
     hamming, Descriptor, Features, KeyPoint, LevelInfo, Pyramid, KITTI_MAX_FEATURES,
-    KITTI_MAX_HEIGHT,
+    KITTI_MAX_HEIGHT, MAX_FRAME_HEIGHT,
 };
 
 /// ORB-SLAM2's `ORBmatcher::TH_HIGH`.
@@ -320,6 +320,11 @@ pub const KITTI_STEREO_MATCHER_BYTES: usize = core::mem::size_of::<KittiStereoMa
 pub const KITTI_STEREO_MATCHER_BUDGET: usize = 96 << 10;
 
 const _: () = assert!(KITTI_STEREO_MATCHER_BYTES <= KITTI_STEREO_MATCHER_BUDGET);
+
+/// The matcher the localiser uses: [`MAX_FRAME_HEIGHT`] rows, 2048 key points per side (the row
+/// entries do not grow with the frame: a key point spans the same rows at any frame size).
+pub type FrameStereoMatcher =
+    StereoMatcher<KITTI_MAX_FEATURES, MAX_FRAME_HEIGHT, KITTI_STEREO_MAX_ENTRIES>;
 
 impl<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize> Default
     for StereoMatcher<MAX_KP, MAX_ROWS, MAX_ENTRIES>

@@ -291,6 +291,63 @@ pub fn stereo_pair(
     }
 }
 
+/// Renders what a pinhole camera at `eye` (metres, camera axes: x right, y down, z forward; no
+/// rotation) sees of a textured corridor: a floor 1.6 m below the eye's start height (y = 1.6),
+/// walls at x = ±5 m, an end wall at z = 80 m; above the walls' 6 m height is a flat grey sky.
+/// Each surface carries 0.3 m blocks of hashed grey levels (20..=235) with a 0.075 m sub-block
+/// layer of ±24, so corners exist at every pyramid level and at every distance. The image is
+/// `w × h`, intrinsics `fx = fy`, principal point `(cx, cy)`; any size, so tests can check the
+/// localiser at frame sizes other than KITTI's. Pixel centres are sampled once (no
+/// anti-aliasing): the same bytes on every target.
+///
+/// # Panics
+/// If `img` is shorter than `w·h`.
+#[allow(clippy::too_many_arguments)]
+pub fn corridor(img: &mut [u8], w: usize, h: usize, fx: f64, cx: f64, cy: f64, eye: [f64; 3]) {
+    const FLOOR_Y: f64 = 1.6;
+    const WALL_X: f64 = 5.0;
+    const WALL_TOP_Y: f64 = -4.4;
+    const END_Z: f64 = 80.0;
+    fn hash(a: i64, b: i64, c: u64) -> u64 {
+        let mut z = (a as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            ^ (b as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f)
+            ^ c.wrapping_mul(0x1656_67b1_9e37_79f9);
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    let shade = |s: f64, t: f64, surface: u64| -> u8 {
+        let (bs, bt) = (libm::floor(s / 0.3) as i64, libm::floor(t / 0.3) as i64);
+        let (fs, ft) = (libm::floor(s / 0.075) as i64, libm::floor(t / 0.075) as i64);
+        let base = 20 + (hash(bs, bt, surface) % 216) as i64;
+        let fine = (hash(fs, ft, surface + 8) % 49) as i64 - 24;
+        (base + fine).clamp(0, 255) as u8
+    };
+    for (i, p) in img[..w * h].iter_mut().enumerate() {
+        let (u, v) = ((i % w) as f64, (i / w) as f64);
+        let d = [(u - cx) / fx, (v - cy) / fx, 1.0];
+        let mut best = (f64::INFINITY, 200u8);
+        let mut hit = |t: f64, value: &dyn Fn([f64; 3]) -> Option<u8>| {
+            if t > 1e-6 && t < best.0 {
+                let q = [eye[0] + t * d[0], eye[1] + t * d[1], eye[2] + t * d[2]];
+                if let Some(g) = value(q) {
+                    best = (t, g);
+                }
+            }
+        };
+        if d[1] > 0.0 {
+            hit((FLOOR_Y - eye[1]) / d[1], &|q| Some(shade(q[0], q[2], 1)));
+        }
+        if d[0] != 0.0 {
+            let x = if d[0] > 0.0 { WALL_X } else { -WALL_X };
+            let surface = if d[0] > 0.0 { 2 } else { 3 };
+            hit((x - eye[0]) / d[0], &|q| (q[1] >= WALL_TOP_Y).then(|| shade(q[2], q[1], surface)));
+        }
+        hit((END_Z - eye[2]) / d[2], &|q| (q[1] >= WALL_TOP_Y).then(|| shade(q[0], q[1], 4)));
+        *p = best.1;
+    }
+}
+
 /// FNV-1a (64-bit) over byte slices, for golden hashes of a test's whole output.
 #[derive(Clone, Copy, Debug)]
 pub struct Fnv1a(u64);

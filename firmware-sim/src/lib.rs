@@ -24,12 +24,13 @@
 //! `qemu-system-aarch64 -M virt`), `host_poses` (x86-64, std) and `thumbv7em_size` (a
 //! Cortex-M7 link of the same code, for the section-size report). See `firmware-sim/README.md`.
 //!
-//! Memory: [`Localiser::MEMORY_BYTES`] (≈ 11 MiB, dominated by the tracker and the two
-//! extractors' pyramids) plus, with semantics, [`SegStorage::MEMORY_BYTES`] (≈ 2.2 MiB: the
+//! Memory: [`Localiser::MEMORY_BYTES`] (≈ 41 MiB: the tracker's map and the two extractors'
+//! pyramids, sized for frames up to 1920 × 1200) plus, with semantics, [`SegStorage::MEMORY_BYTES`] (≈ 2.2 MiB: the
 //! network's arena and maps) and the network blob, read in place. Build the localiser where a
 //! by-value move of that size is safe (a static slot on bare metal, a `Box` on a big-stack
 //! thread on the host): its constructor returns it by value, and on aarch64 the construction
-//! peaks at ≈ 36 MB of stack, while processing a frame needs ≈ 15 KB.
+//! peaks at a few times its size in stack (`qemu-check.sh` prints the peak), while processing a
+//! frame needs ≈ 15 KB.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 

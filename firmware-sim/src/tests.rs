@@ -6,8 +6,8 @@ use std::string::String;
 use crate::embedded::{self, CAMERA, FRAMES, HEIGHT, WIDTH};
 use crate::report::{self, pose_error, write_pose_line, Fnv1a, RunSummary};
 
-/// Stack for threads that build the ≈ 10 MiB localiser.
-const BIG_STACK_BYTES: usize = 256 << 20;
+/// Stack for threads that build the ≈ 41 MiB localiser.
+const BIG_STACK_BYTES: usize = 1 << 30;
 
 fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
     std::thread::Builder::new()

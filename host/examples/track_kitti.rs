@@ -23,7 +23,7 @@ fn run(path: PathBuf, max_frames: usize) -> Result<(), Box<dyn core::error::Erro
     // Core's state is ≈ 11 MiB of fixed arrays: build it on a thread with a big stack and keep
     // it in a box (on an ECU it would be a `static`).
     let mut loc = std::thread::Builder::new()
-        .stack_size(256 << 20)
+        .stack_size(1 << 30)
         .spawn(move || Localiser::new(&config).map(Box::new))?
         .join()
         .map_err(|_| "constructor thread panicked")??;

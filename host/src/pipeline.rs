@@ -16,7 +16,7 @@ use semloc_core::localiser::{
     LeftExtraction, Localiser, LocaliserConfig, LocaliserError, RightExtraction,
 };
 use semloc_core::nn::graph::Kernels;
-use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
+use semloc_core::orb::{FrameOrbExtractor, OrbConfig};
 use semloc_core::seg::WeightScheme;
 use semloc_core::stereo::{StereoMatching, StereoStats};
 use semloc_core::tracker::{FrameReport, Tracker, TrackerParams};
@@ -293,7 +293,7 @@ struct Prefetch {
 }
 
 /// Stack for threads that construct or run core's large fixed-size state.
-pub const BIG_STACK_BYTES: usize = 256 << 20;
+pub const BIG_STACK_BYTES: usize = 1 << 30;
 
 impl Pipeline {
     /// Builds the pipeline for `calib` and `width`x`height` images, with ORB-SLAM2's KITTI
@@ -569,7 +569,7 @@ impl Pipeline {
             Some(seg) => segment(seg, &img, i)?,
             None => src.labels(i)?.into_owned(),
         };
-        let count = |ex: &KittiOrbExtractor| {
+        let count = |ex: &FrameOrbExtractor| {
             let mut c = CategoryCounts::default();
             for kp in ex.features().keypoints() {
                 let x = (kp.x.round().max(0.0) as u32).min(labels.width().saturating_sub(1));

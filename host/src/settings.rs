@@ -170,7 +170,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("orb", "ORB extraction, both images (ORB-SLAM2's ORBextractor.*)."),
     ("orb.n_features", "Features per image over all levels (nFeatures), at most 2048."),
     ("orb.scale_factor", "Scale between pyramid levels (scaleFactor), > 1."),
-    ("orb.n_levels", "Pyramid levels (nLevels), 1..=16; all levels must fit the extractor's pyramid memory (8 levels at scale 1.2 for 1248x384)."),
+    ("orb.n_levels", "Pyramid levels (nLevels), 1..=16; all levels must fit the extractor's pyramid memory (8 levels at scale 1.2 for frames up to 1920x1200)."),
     ("orb.ini_th_fast", "FAST threshold tried first in each cell (iniThFAST), grey levels."),
     ("orb.min_th_fast", "FAST threshold for cells with no corner at ini_th_fast (minThFAST), grey levels, 1..=ini_th_fast."),
     ("orb.quota_rule", "Features per level: \"orbslam2\" (geometric, ratio 1/scale, as ORB-SLAM2's code) or \"area\" (ratio 1/scale², as the papers describe it)."),

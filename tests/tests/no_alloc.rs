@@ -107,7 +107,7 @@ fn synthetic_pair(w: usize, h: usize, shift: usize) -> (Vec<u8>, Vec<u8>) {
 }
 
 fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
-    std::thread::Builder::new().stack_size(256 << 20).spawn(f).unwrap().join().unwrap()
+    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap()
 }
 
 fn synthetic_frames() -> Clip {

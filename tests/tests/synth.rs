@@ -271,7 +271,7 @@ fn orb_and_stereo_statistics_vs_kitti() {
     ) -> (usize, usize, u32, [usize; 8]) {
         let (l, r) = (l.clone(), r.clone());
         std::thread::Builder::new()
-            .stack_size(256 << 20)
+            .stack_size(1 << 30)
             .spawn(move || {
                 let (w, h) = (l.width() as usize, l.height() as usize);
                 let f = f64::from(bf / b);

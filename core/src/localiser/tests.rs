@@ -47,7 +47,7 @@ fn localiser(semantics: Option<WeightScheme>) -> Box<Localiser> {
 }
 
 fn on_big_stack<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new().stack_size(256 << 20).spawn(f).unwrap().join().unwrap();
+    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap();
 }
 
 #[test]
@@ -161,11 +161,67 @@ fn localiser_fits_its_budget() {
     );
     // The state is the core pieces and the two frame images, nothing else (up to padding).
     use core::mem::size_of;
-    let parts = 2 * size_of::<KittiOrbExtractor>()
-        + size_of::<KittiStereoMatcher>()
+    let parts = 2 * size_of::<FrameOrbExtractor>()
+        + size_of::<FrameStereoMatcher>()
         + size_of::<Frame>()
         + size_of::<Tracker>()
         + 2 * MAX_PIXELS;
     let total = core::hint::black_box(Localiser::MEMORY_BYTES);
     assert!(total >= parts && total - parts < 512, "{total} vs {parts}");
+}
+
+/// Tracks the rendered corridor ([`crate::testing::corridor`]) at a frame size other than
+/// KITTI's, the camera moving 0.8 m forward per frame with a lateral weave; returns the largest
+/// position error (m) against the rendered path.
+fn corridor_run(w: usize, h: usize, fx: f64, frames: usize) -> f64 {
+    use crate::testing::corridor;
+    let (cx, cy, b) = (w as f64 / 2.0 - 0.5, h as f64 / 2.0 - 0.5, 0.5);
+    let cam = StereoCamera::new(fx, fx, cx, cy, b).unwrap();
+    let mut loc = Box::new(Localiser::new(&LocaliserConfig::new(cam, w as u32, h as u32)).unwrap());
+    let (mut l, mut r) = (std::vec![0u8; w * h], std::vec![0u8; w * h]);
+    let mut worst: f64 = 0.0;
+    for k in 0..frames {
+        let eye = [0.3 * libm::sin(k as f64 / 3.0), 0.0, 0.8 * k as f64];
+        corridor(&mut l, w, h, fx, cx, cy, eye);
+        corridor(&mut r, w, h, fx, cx, cy, [eye[0] + b, eye[1], eye[2]]);
+        let out = loc.process_raw(&l, &r, k as f64 * 0.1, None).unwrap();
+        assert!(out.stereo.matched > 100, "{w}x{h} frame {k}: {:?}", out.stereo);
+        let t = out.report.t_wc.trans;
+        let err = libm::sqrt(
+            (t.x - eye[0]) * (t.x - eye[0]) + (t.y - eye[1]).powi(2) + (t.z - eye[2]).powi(2),
+        );
+        worst = worst.max(err);
+    }
+    worst
+}
+
+#[test]
+fn any_frame_size_up_to_the_maximum_is_tracked() {
+    on_big_stack(|| {
+        // Automotive 2.3 MP (the compile-time maximum), EuRoC's 752 × 480, 720p.
+        for (w, h, fx, frames) in
+            [(1920, 1200, 1000.0, 6), (752, 480, 458.0, 10), (1280, 720, 700.0, 8)]
+        {
+            let worst = corridor_run(w, h, fx, frames);
+            std::println!("{w}x{h}: worst position error {worst:.4} m over {frames} frames");
+            // 0.8 m per frame: a few cm is tracking, a scale or axis mix-up is metres.
+            assert!(worst < 0.05, "{w}x{h}: worst position error {worst} m");
+        }
+    });
+}
+
+#[test]
+fn frames_beyond_the_maximum_are_refused() {
+    on_big_stack(|| {
+        for (w, h) in [(MAX_FRAME_WIDTH + 1, 100), (100, MAX_FRAME_HEIGHT + 1)] {
+            let c = LocaliserConfig::new(cam(), w as u32, h as u32);
+            assert_eq!(
+                Localiser::new(&c).err(),
+                Some(LocaliserError::FrameSize {
+                    expected: (MAX_FRAME_WIDTH, MAX_FRAME_HEIGHT),
+                    got: (w, h)
+                })
+            );
+        }
+    });
 }

@@ -500,6 +500,41 @@ pub type KittiOrbExtractor = OrbExtractor<
     KITTI_MAX_CANDIDATES,
 >;
 
+/// Widest frame the [`Localiser`](crate::localiser::Localiser) takes: 1920 px, the common
+/// automotive 2.3 MP format (1920 × 1200 sensors such as AR0231 and IMX390; 1920 × 1080 fits too).
+/// A compile-time maximum: every buffer below is sized for it, so memory stays fixed.
+pub const MAX_FRAME_WIDTH: usize = 1920;
+/// Tallest frame the [`Localiser`](crate::localiser::Localiser) takes: 1200 px (see
+/// [`MAX_FRAME_WIDTH`]). KITTI (1241 × 376), EuRoC (752 × 480) and 1280 × 720 all fit.
+pub const MAX_FRAME_HEIGHT: usize = 1200;
+/// Candidate capacity per level of [`FrameOrbExtractor`]: [`KITTI_MAX_CANDIDATES`] scaled with
+/// the frame area (a 1920 × 1200 level 0 yields up to ≈ 5× KITTI's corners).
+pub const FRAME_MAX_CANDIDATES: usize = 65536;
+
+/// The extractor the localiser uses: 8 levels at scale ≥ 1.2 of frames up to
+/// [`MAX_FRAME_WIDTH`] × [`MAX_FRAME_HEIGHT`], [`KITTI_MAX_FEATURES`] output features.
+pub type FrameOrbExtractor = OrbExtractor<
+    MAX_FRAME_WIDTH,
+    { MAX_FRAME_WIDTH * MAX_FRAME_HEIGHT },
+    { pyramid_capacity(MAX_FRAME_WIDTH, MAX_FRAME_HEIGHT, 8) },
+    KITTI_MAX_FEATURES,
+    FRAME_MAX_CANDIDATES,
+>;
+
+/// `size_of::<FrameOrbExtractor>()`.
+pub const FRAME_EXTRACTOR_BYTES: usize = core::mem::size_of::<FrameOrbExtractor>();
+
+/// Memory budget of [`FrameOrbExtractor`]: 10.5 MiB — pyramid (≈ 7.1 MB), one level of scratch
+/// (2.3 MB), candidates (0.5 MB), output (0.11 MB), the rest row buffers and nodes.
+pub const FRAME_EXTRACTOR_BUDGET: usize = 21 << 19;
+
+const _: () = assert!(FRAME_EXTRACTOR_BYTES <= FRAME_EXTRACTOR_BUDGET);
+// The FAST cell grid of the largest level 0 fits the cell buffer.
+const _: () = assert!(
+    MAX_FRAME_WIDTH.div_ceil(FAST_CELL_SIZE) * MAX_FRAME_HEIGHT.div_ceil(FAST_CELL_SIZE)
+        <= MAX_CELLS
+);
+
 /// `size_of::<KittiOrbExtractor>()`.
 pub const KITTI_EXTRACTOR_BYTES: usize = core::mem::size_of::<KittiOrbExtractor>();
 

@@ -82,7 +82,7 @@ fn render(pts: &[Point], t_wc: &Se3, rng: &mut Rng) -> Frame {
 }
 
 fn run_on_big_stack<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new().stack_size(256 << 20).spawn(f).unwrap().join().unwrap();
+    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap();
 }
 
 #[test]

@@ -17,8 +17,8 @@ use semloc_firmware_sim::{
     embedded_localiser, geometric_params, semantic_params, Network, SegStorage, SEMANTIC_SCHEME,
 };
 
-/// Stack for the thread that builds the ≈ 10 MiB localiser (a by-value return may sit on it).
-const BIG_STACK_BYTES: usize = 256 << 20;
+/// Stack for the thread that builds the ≈ 41 MiB localiser (a by-value return may sit on it).
+const BIG_STACK_BYTES: usize = 1 << 30;
 
 /// Both runs; the text so far even on failure, and whether both tracked.
 fn run(text: &mut String) -> Result<bool, String> {

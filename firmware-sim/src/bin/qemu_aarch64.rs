@@ -6,14 +6,14 @@
 //!
 //! ```text
 //! cargo build --release -p semloc-firmware-sim --target aarch64-unknown-none --bin qemu_aarch64
-//! qemu-system-aarch64 -M virt -cpu cortex-a72 -m 256M -nographic \
+//! qemu-system-aarch64 -M virt -cpu cortex-a72 -m 512M -nographic \
 //!     -semihosting-config enable=on,target=native \
 //!     -kernel target/aarch64-unknown-none/release/qemu_aarch64
 //! ```
 //!
 //! Memory map (`qemu_virt.ld`): code, constants (the embedded frames) and data from
 //! `0x4008_0000`, then `.bss` (the ≈ 22 MiB `Localiser` and the network's ≈ 2.5 MiB
-//! buffers, zeroed by `_start`), then a 160 MiB
+//! buffers, zeroed by `_start`), then a 320 MiB
 //! stack that `_start` paints so the peak use can be reported. Lines starting with `@` are
 //! this target's own (timings from the generic timer, stack peak); the rest is the same text
 //! the host prints.

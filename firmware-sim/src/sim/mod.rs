@@ -3,7 +3,7 @@
 //! Runs the [`Localiser`] the way an ECU task would, on the host:
 //!
 //! * **Fixed state, built once.** Everything the loop touches is allocated at start-up: the
-//!   localiser (boxed, ≈ 10 MiB), the segmentation buffers (network arena, input and label
+//!   localiser (boxed, ≈ 41 MiB), the segmentation buffers (network arena, input and label
 //!   maps, weight image), the frame ring's slots, the per-frame record table. After start-up
 //!   the ECU part of the loop allocates nothing; with a counting global allocator (the
 //!   `ecu-sim` binary and the tests install `stats_alloc`) the count is measured and reported.
@@ -152,9 +152,9 @@ impl Default for SimConfig {
 }
 
 /// Stack reserved for the simulation thread (virtual; only touched pages are used): the
-/// localiser's constructor returns ≈ 10 MiB by value and peaks at ≈ 36 MB of stack on aarch64
+/// localiser's constructor returns ≈ 41 MiB by value and peaks at a few times that on aarch64
 /// (see the crate README); unoptimised host builds move the value a few more times.
-pub const SIM_STACK_BYTES: usize = 256 << 20;
+pub const SIM_STACK_BYTES: usize = 1 << 30;
 
 /// Peak stack of one frame, measured on the bare-metal aarch64 image by painting its stack
 /// (`qemu-check.sh`, `@ stack` lines): geometric pipeline.
