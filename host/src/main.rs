@@ -43,6 +43,9 @@ enum Command {
     Ablate(cli::ablate::AblateArgs),
     /// Time the pipeline per stage, against OpenCV's ORB and a one-thread run of itself.
     Bench(cli::bench::BenchArgs),
+    /// Every sequence of a KITTI odometry root, one Table-3-style table (t_rel, r_rel, ATE per
+    /// sequence and configuration), optionally beside reference trajectories (e.g. ORB-SLAM2).
+    BenchKitti(cli::bench_kitti::BenchKittiArgs),
     /// Write a synthetic KITTI-layout stereo sequence with traffic, GT poses and labels.
     Synth(cli::synth::SynthArgs),
     /// Convert a float ONNX export + its quant.json to the int8 .slm blob the core runs.
@@ -78,6 +81,7 @@ fn main() -> std::process::ExitCode {
         Command::Run(args) => cli::run::run(&args),
         Command::Ablate(args) => cli::ablate::run(&args),
         Command::Bench(args) => cli::bench::run(&args),
+        Command::BenchKitti(args) => cli::bench_kitti::run(&args),
         Command::Demo(args) => cli::demo::run(&args),
         Command::Synth(args) => cli::synth::run(&args),
         Command::Convert(args) => cli::convert::run(&args),

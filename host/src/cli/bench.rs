@@ -307,7 +307,7 @@ fn pipeline_times(
 ) -> Result<Vec<FrameRecord>> {
     let (w, h) = seq.image_size;
     let mut p = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), threads)?;
-    let tracked = track_frames(&mut p, frames, frames.left.len(), None, &mut |_| Ok(()));
+    let tracked = track_frames(&mut p, frames, frames.left.len(), None, &mut |_, _| Ok(()));
     match tracked.failure {
         Some(e) => Err(e.into()),
         None => Ok(tracked.frames),

@@ -2,6 +2,7 @@
 
 pub mod ablate;
 pub mod bench;
+pub mod bench_kitti;
 pub mod config;
 pub mod convert;
 pub mod demo;

@@ -69,6 +69,12 @@ pub struct RunArgs {
     /// ATE alignment for the evaluation (see `semloc eval --help`).
     #[arg(long, value_enum, ignore_case = true, default_value_t = super::eval::AlignArg::Se3)]
     pub align: super::eval::AlignArg,
+    /// Also write the map points as a PLY point cloud (x, y, z in metres in the first left
+    /// camera's frame, CamVid class and its colour, observation count, first and last frame):
+    /// every point that at some time had two or more keyframe observations. Written when the
+    /// run ends (also after an interruption).
+    #[arg(long, value_name = "FILE.ply")]
+    pub export_map: Option<PathBuf>,
 }
 
 /// `--assoc` values.
@@ -153,6 +159,16 @@ pub fn run(args: &RunArgs) -> Result<()> {
     for n in &ignored {
         eprintln!("note: {}: {n}", settings_file.as_deref().unwrap_or(Path::new("")).display());
     }
+    if let Some(p) = &args.export_map {
+        let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if !dir.is_dir() {
+            anyhow::bail!(
+                "--export-map {}: the folder {} does not exist",
+                p.display(),
+                dir.display()
+            );
+        }
+    }
     let seq = args.data.open()?;
     let mut tracker = settings.tracker;
     if let Some(n) = args.ransac_iterations {
@@ -173,6 +189,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         network: args.model.clone().or(settings.semantics.model).map(Network::File),
         align: args.align.into(),
         force: args.force,
+        export_map: args.export_map.clone(),
         ..RunConfig::new(&seq, &args.out)
     };
     let outcome = run_with_progress(cfg)?;

@@ -13,6 +13,7 @@
 //! network's when one is set, and one [`FrameRecord`] per frame (a few hundred bytes) kept for
 //! the outputs and the caller.
 
+pub mod map_export;
 pub mod outputs;
 pub mod provenance;
 pub mod stats;
@@ -128,6 +129,8 @@ pub struct RunConfig<'a> {
     pub stop: Option<StopFlag>,
     /// The command line, recorded in `summary.json`'s provenance.
     pub command_line: Vec<String>,
+    /// Where to write the map points as PLY (`--export-map`), if anywhere.
+    pub export_map: Option<PathBuf>,
 }
 
 impl<'a> RunConfig<'a> {
@@ -150,6 +153,7 @@ impl<'a> RunConfig<'a> {
             force: false,
             stop: None,
             command_line: Vec::new(),
+            export_map: None,
         }
     }
 
@@ -508,13 +512,14 @@ pub struct Tracked {
 
 /// Feeds frames `0..n` of `src` through `pipe` in order, calling `on_frame` after each; stops
 /// at the first frame that fails, at the first `on_frame` error, or when `stop` is set
-/// (checked before each frame), and returns why with the frames before it.
+/// (checked before each frame), and returns why with the frames before it. `on_frame` sees the
+/// pipeline as the frame left it (its map, features and labels).
 pub fn track_frames(
     pipe: &mut Pipeline,
     src: &(impl FrameSource + ?Sized),
     n: usize,
     stop: Option<&StopFlag>,
-    on_frame: &mut dyn FnMut(&FrameRecord) -> Result<(), RunError>,
+    on_frame: &mut dyn FnMut(&Pipeline, &FrameRecord) -> Result<(), RunError>,
 ) -> Tracked {
     let mut frames = Vec::with_capacity(n);
     for i in 0..n {
@@ -531,7 +536,7 @@ pub fn track_frames(
                 let record = FrameRecord { timestamp_s: src.timestamp_s(i), output, moving_check };
                 // A frame whose lines could not be written is not counted: the records and
                 // the per-frame files always hold the same frames.
-                if let Err(e) = on_frame(&record) {
+                if let Err(e) = on_frame(pipe, &record) {
                     return Tracked { frames, failure: Some(RunFailure::Output(e)) };
                 }
                 frames.push(record);
@@ -575,6 +580,7 @@ pub fn run_observed(
         force,
         stop,
         command_line,
+        export_map,
     } = cfg;
     let (w, h) = seq.image_size;
     if let Some(c) = &camera {
@@ -644,14 +650,32 @@ pub fn run_observed(
         model,
     };
 
+    let mut map = export_map.as_ref().map(|_| map_export::MapCollector::new());
     let mut stream = stream::StreamWriter::create(&out, seq.time_origin_s)?;
     let Tracked { frames, failure } =
-        track_frames(&mut pipe, seq, n, stop.as_ref(), &mut |r: &FrameRecord| {
+        track_frames(&mut pipe, seq, n, stop.as_ref(), &mut |p: &Pipeline, r: &FrameRecord| {
             stream.append(r)?;
+            if let Some(m) = map.as_mut() {
+                m.observe(p.tracker().map(), r.output.report.frame_index);
+            }
             on_frame(r);
             Ok(())
         });
     drop(stream);
+    // The map file is an output like the others: failing to write it fails the run (after
+    // the summary is written), unless the run already failed.
+    let mut failure = failure;
+    if let (Some(m), Some(path)) = (&map, &export_map) {
+        match m.write_ply(path) {
+            Ok(n) => notices.push(format!(
+                "map: {n} confirmed points (of {} seen) written to {}",
+                m.seen(),
+                path.display()
+            )),
+            Err(e) if failure.is_none() => failure = Some(RunFailure::Output(e)),
+            Err(e) => warnings.push(format!("--export-map: {}", outputs::error_chain(&e))),
+        }
+    }
 
     // Evaluation: skipped with a reason rather than failing the run.
     let poses: Vec<Se3> = frames.iter().map(|r| r.output.report.t_wc).collect();

@@ -1,0 +1,45 @@
+//! Helpers shared by the CLI tests: run the `semloc` binary, read its output, make a small
+//! synthetic sequence once per test binary.
+#![allow(dead_code)] // each test binary uses its own subset
+
+use std::path::Path;
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// Runs the `semloc` binary built for these tests.
+pub fn semloc(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
+}
+
+/// stdout and stderr of `o`, for assertion messages.
+pub fn text(o: &Output) -> String {
+    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// `p` as UTF-8 (temporary paths are).
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// `ROOT/sequences/00` of `semloc synth` (10 frames, a street lined with parked cars, with
+/// `semantic/` labels) and `ROOT/poses/00.txt`, written once per test binary.
+pub fn parked_root() -> &'static Path {
+    static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
+    ROOT.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let o = semloc(&[
+            "synth",
+            "--out",
+            s(dir.path()),
+            "--frames",
+            "10",
+            "--dynamics",
+            "parked",
+            "--seed",
+            "11",
+        ]);
+        assert!(o.status.success(), "synth: {}", text(&o));
+        dir
+    })
+    .path()
+}
