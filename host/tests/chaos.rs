@@ -138,7 +138,7 @@ fn check_outputs(out: &Path) -> Outputs {
         assert!(t.ends_with('\n'), "frames.csv ends mid-line");
         let mut lines = t.lines();
         let header: Vec<&str> = lines.next().expect("frames.csv header").split(',').collect();
-        assert_eq!(header.join(","), semloc::run::FRAMES_CSV_HEADER);
+        assert_eq!(header.join(","), semloc::run::frames_csv_header());
         for (k, l) in lines.enumerate() {
             let cells: Vec<&str> = l.split(',').collect();
             assert_eq!(cells.len(), header.len(), "frames.csv row {k}: {l}");
