@@ -138,7 +138,7 @@ fn check_outputs(out: &Path) -> Outputs {
         assert!(t.ends_with('\n'), "frames.csv ends mid-line");
         let mut lines = t.lines();
         let header: Vec<&str> = lines.next().expect("frames.csv header").split(',').collect();
-        assert_eq!(header.join(","), semloc::run::FRAMES_CSV_HEADER);
+        assert_eq!(header.join(","), semloc::run::frames_csv_header());
         for (k, l) in lines.enumerate() {
             let cells: Vec<&str> = l.split(',').collect();
             assert_eq!(cells.len(), header.len(), "frames.csv row {k}: {l}");
@@ -167,7 +167,13 @@ fn check_outputs(out: &Path) -> Outputs {
         for p in plots.flatten() {
             let name = p.file_name().to_string_lossy().into_owned();
             assert!(!name.ends_with(".tmp"), "temporary plot {name} left behind");
-            image::open(p.path()).unwrap_or_else(|e| panic!("plot {name} does not decode: {e}"));
+            if name.ends_with(".svg") {
+                let t = std::fs::read_to_string(p.path()).unwrap();
+                assert!(t.trim_end().ends_with("</svg>"), "plot {name} is not a whole SVG");
+            } else {
+                image::open(p.path())
+                    .unwrap_or_else(|e| panic!("plot {name} does not decode: {e}"));
+            }
         }
     }
     Outputs { frames: frames.unwrap_or(0), summary, statuses }

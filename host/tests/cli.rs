@@ -52,7 +52,11 @@ fn eval_prints_devkit_and_ate_and_writes_json_and_plots() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let t = v["t_rel_pct"].as_f64().expect("t_rel_pct in JSON");
     assert!((t - 1.0).abs() < 0.02, "1 % scale error gives t_rel {t}");
-    assert!(plots.join("trajectory.png").is_file() && plots.join("errors.png").is_file());
+    for name in ["trajectory", "ate", "rpe", "position", "orientation", "per_length"] {
+        for ext in ["svg", "png"] {
+            assert!(plots.join(format!("{name}.{ext}")).is_file(), "{name}.{ext} missing");
+        }
+    }
 }
 
 #[test]

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use semloc::dataset::Sequence;
-use semloc::run::{Network, RunConfig, RunError, Semantics, FRAMES_CSV_HEADER};
+use semloc::run::{frames_csv_header, Network, RunConfig, RunError, Semantics};
 use semloc::synth::{generate, Dynamics, SynthConfig};
 use semloc_core::assoc::Association;
 use semloc_core::tracker::TrackerParams;
@@ -53,8 +53,8 @@ fn outputs_exist_parse_and_agree_with_the_result() {
     // frames.csv: the header, then one row per record
     let csv = read(&out.join("frames.csv"));
     let mut lines = csv.lines();
-    assert_eq!(lines.next(), Some(FRAMES_CSV_HEADER));
-    let columns: Vec<&str> = FRAMES_CSV_HEADER.split(',').collect();
+    assert_eq!(lines.next(), Some(frames_csv_header()));
+    let columns: Vec<&str> = frames_csv_header().split(',').collect();
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), r.frames.len());
     for (row, f) in rows.iter().zip(&r.frames) {
@@ -94,7 +94,7 @@ fn outputs_exist_parse_and_agree_with_the_result() {
         "{ate} vs {}",
         eval.ate_rmse_m
     );
-    for plot in ["trajectory.png", "errors.png"] {
+    for plot in ["trajectory.png", "trajectory.svg", "ate.png", "rpe.svg", "orientation.png"] {
         assert!(out.join("plots").join(plot).is_file(), "{plot} missing");
     }
 }

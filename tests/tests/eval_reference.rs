@@ -236,7 +236,8 @@ fn plots_of_sequence_00() {
     let dir = std::env::var_os("SEMLOC_PLOT_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| tmp.path().to_path_buf());
-    let files = semloc::plot::write_eval_plots(&dir, &gt, &r).unwrap();
+    let files = semloc::plot::write_eval_plots(&dir, &gt, &r, None).unwrap();
+    assert_eq!(files.len(), 12, "six figures, SVG and PNG each");
     for f in &files {
         assert!(std::fs::metadata(f).unwrap().len() > 1000, "{}", f.display());
     }

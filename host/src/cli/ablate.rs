@@ -305,12 +305,12 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         );
     }
     print!("{text}");
+    for p in write_overlay(&args.out, &seq, &rows, n)? {
+        println!("wrote {}", p.display());
+    }
     let p = args.out.join("ablation.txt");
     std::fs::write(&p, &text).with_context(|| format!("writing {}", p.display()))?;
-    let folders: Vec<String> = rows
-        .iter()
-        .map(|r| format!("{}-{}", r.semantics.name(), association_name(r.assoc)))
-        .collect();
+    let folders: Vec<String> = rows.iter().map(row_name).collect();
     let json_rows: Vec<JsonRow<'_>> = rows
         .iter()
         .zip(&folders)
@@ -362,10 +362,39 @@ pub fn run(args: &AblateArgs) -> Result<()> {
     Ok(())
 }
 
-/// Every entry `semloc ablate` (or `demo`) may write into its output folder: the tables and
-/// one `semantics-assoc` folder per possible row.
+/// The name of a row: its folder, `semantics-assoc`.
+pub fn row_name(r: &Row) -> String {
+    format!("{}-{}", r.semantics.name(), association_name(r.assoc))
+}
+
+/// Writes `trajectories.svg` and `trajectories.png` into `out`: one top view with the ground
+/// truth and every evaluated row's aligned estimate overlaid, the legend naming the rows.
+/// Nothing (an empty list) when the sequence has no ground truth or no row was evaluated.
+pub fn write_overlay(
+    out: &std::path::Path,
+    seq: &Sequence,
+    rows: &[Row],
+    n_frames: usize,
+) -> Result<Vec<PathBuf>> {
+    let Some(gt) = &seq.gt else { return Ok(Vec::new()) };
+    let evaluated: Vec<(String, &semloc::eval::EvalReport)> =
+        rows.iter().filter_map(|r| Some((row_name(r), r.outcome.eval.as_ref()?))).collect();
+    let Some((_, first)) = evaluated.first() else { return Ok(Vec::new()) };
+    let n = evaluated.iter().map(|(_, e)| e.aligned_est.len()).max().unwrap_or(0).min(gt.len());
+    let estimates: Vec<(String, Vec<semloc_core::geom::Se3>)> =
+        evaluated.iter().map(|(name, e)| (name.clone(), e.aligned_est.clone())).collect();
+    let title = format!("Top view of every row, {n_frames} frames of {}", seq.summary().name);
+    let stem = out.join("trajectories");
+    Ok(semloc::plot::write_overlay_top_view(&stem, &gt[..n], &estimates, first.align, &title)?)
+}
+
+/// Every entry `semloc ablate` (or `demo`) may write into its output folder: the tables, the
+/// overlaid top view and one `semantics-assoc` folder per possible row.
 pub fn ablate_outputs() -> Vec<String> {
-    let mut v: Vec<String> = ["ablation.json", "ablation.txt", "sequence"].map(String::from).into();
+    let mut v: Vec<String> =
+        ["ablation.json", "ablation.txt", "sequence", "trajectories.svg", "trajectories.png"]
+            .map(String::from)
+            .into();
     for s in [Semantics::Off, Semantics::Cull, Semantics::Full, Semantics::Motion] {
         for a in [Association::Hard, Association::Em] {
             v.push(format!("{}-{}", s.name(), association_name(a)));

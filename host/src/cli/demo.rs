@@ -11,7 +11,7 @@ use semloc::run::{Network, RunConfig, Semantics};
 use semloc::synth::{generate, Dynamics, SynthConfig};
 use semloc_core::assoc::Association;
 
-use super::ablate::{run_rows, table};
+use super::ablate::{run_rows, table, write_overlay};
 
 /// Arguments of `semloc demo`.
 #[derive(Args, Debug)]
@@ -88,6 +88,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     println!();
     print!("{}", table(&rows));
     println!();
+    for p in write_overlay(&out, &seq, &rows, cfg.frames)? {
+        println!("wrote {}", p.display());
+    }
     println!(
         "semantics: labels are {}; 'cull' drops features on cars, pedestrians and cyclists, 'full' \
          also weights buildings, fences, poles and signs x3 (the paper's semantic ORB).",

@@ -38,8 +38,10 @@ pub struct EvalArgs {
     /// Also write the full report (summary, per-length table, per-segment errors) as JSON here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Write PNG plots into this folder: `trajectory.png` (top view of ground truth and aligned
-    /// estimate) and `errors.png` (error over distance travelled). Created if missing.
+    /// Write plots into this folder (created if missing), each as SVG and PNG: `trajectory`
+    /// (top view of ground truth and aligned estimate), `ate` (ATE over distance travelled),
+    /// `rpe` (RPE over time), `position` and `orientation` (over time), `per_length` (devkit
+    /// errors per segment length). See docs/outputs.md.
     #[arg(long, value_name = "DIR")]
     pub plot: Option<PathBuf>,
 }
@@ -97,16 +99,21 @@ fn load(path: &std::path::Path, format: FormatArg) -> Result<Loaded> {
     })
 }
 
+/// The associated ground-truth and estimated poses, and for TUM files the ground-truth time
+/// of each pair (s).
+type Associated = (Vec<Se3>, Vec<Se3>, Option<Vec<f64>>);
+
 /// Pairs up poses: index by index for KITTI files (with `prefix`, an estimate shorter than
 /// the ground truth takes its first poses), by nearest timestamp, one to one, for TUM files.
-fn associate(gt: Loaded, est: Loaded, max_dt: f64, prefix: bool) -> Result<(Vec<Se3>, Vec<Se3>)> {
+fn associate(gt: Loaded, est: Loaded, max_dt: f64, prefix: bool) -> Result<Associated> {
     match (gt.times, est.times) {
         (Some(tg), Some(te)) => {
             let pairs = traj::associate_by_time(&tg, &te, max_dt);
             if pairs.is_empty() {
                 bail!("no estimated timestamp lies within {max_dt} s of a ground-truth timestamp");
             }
-            Ok(pairs.iter().map(|&(i, j)| (gt.poses[i], est.poses[j])).unzip())
+            let (g, e) = pairs.iter().map(|&(i, j)| (gt.poses[i], est.poses[j])).unzip();
+            Ok((g, e, Some(pairs.iter().map(|&(i, _)| tg[i]).collect())))
         }
         (None, None) => {
             let (g, e) = (gt.poses.len(), est.poses.len());
@@ -120,7 +127,7 @@ fn associate(gt: Loaded, est: Loaded, max_dt: f64, prefix: bool) -> Result<(Vec<
             if prefix {
                 gt_poses.truncate(e);
             }
-            Ok((gt_poses, est.poses))
+            Ok((gt_poses, est.poses, None))
         }
         _ => bail!(
             "one trajectory has timestamps (TUM) and the other has none (KITTI); \
@@ -133,7 +140,7 @@ fn associate(gt: Loaded, est: Loaded, max_dt: f64, prefix: bool) -> Result<(Vec<
 pub fn run(args: &EvalArgs) -> Result<()> {
     let gt = load(&args.gt, args.format)?;
     let est = load(&args.est, args.format)?;
-    let (gt, est) = associate(gt, est, args.max_time_diff, args.prefix)?;
+    let (gt, est, times) = associate(gt, est, args.max_time_diff, args.prefix)?;
     let report = evaluate(&gt, &est, args.align.into()).with_context(|| {
         format!("evaluating {} against {}", args.est.display(), args.gt.display())
     })?;
@@ -145,7 +152,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     }
     if let Some(dir) = &args.plot {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let written = semloc::plot::write_eval_plots(dir, &gt, &report)?;
+        let written = semloc::plot::write_eval_plots(dir, &gt, &report, times.as_deref())?;
         for p in written {
             println!("wrote {}", p.display());
         }

@@ -244,7 +244,7 @@ pub fn overlay_with_legend(frame: &GrayImage, labels: &[u8]) -> RgbImage {
                 }
             }
         }
-        crate::plot::draw_text(&mut out, x + 14, y + 1, name, [0, 0, 0]);
+        crate::plot::draw_label(&mut out, x as i32 + 14, y as i32, name, 12, [0, 0, 0]);
     }
     out
 }

@@ -38,7 +38,7 @@ use crate::nn::{NnFileError, SlmBlob};
 use crate::pipeline::{FrameOutput, FrameSource, Pipeline, PipelineError};
 use crate::settings::CameraSettings;
 
-pub use outputs::{EvalSummary, MotionSummary, Summary, FRAMES_CSV_HEADER};
+pub use outputs::{frames_csv_header, EvalSummary, FrameRow, MotionSummary, Summary};
 pub use provenance::{ModelInfo, Provenance};
 pub use stats::{percentiles, Percentiles};
 pub use stream::{prepare_output_dir, signal_name, write_atomic, StopFlag, RUN_OUTPUTS};
@@ -695,7 +695,9 @@ pub fn run_observed(
     };
     let eval = match gt {
         Some(gt) if poses.len() >= 3 => {
-            let (report, error) = outputs::write_eval(&out, gt, &poses, align, &mut warnings);
+            let times: Vec<f64> = frames.iter().map(|r| r.timestamp_s).collect();
+            let (report, error) =
+                outputs::write_eval(&out, gt, &poses, align, &times, &mut warnings);
             eval_error = error;
             report
         }

@@ -17,14 +17,138 @@ use super::{association_name, FrameRecord, MovingCheck, Provenance, RunError, Ru
 use crate::dataset::{DatasetSummary, Sequence};
 use crate::eval::{evaluate, Align, EvalReport};
 
-/// Header line of `frames.csv`; [`frames_csv_row`] makes one row of these columns per frame.
-/// `status` is how the pose was obtained (`initialised`, `tracked`, `lost`, `coasted`,
-/// `reinitialised`: see `semloc_core::tracker::FrameStatus`); `lost` is 1 on the frame where
-/// tracking failed.
-pub const FRAMES_CSV_HEADER: &str = "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,\
-    extract_wall_ms,stereo_ms,track_ms,seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,\
-    keyframe,lost,initialised,landmarks,keyframes,ba_iterations,culled,em_changed,parked,moving,\
-    unproven,status";
+/// One row of `frames.csv`: its fields, in order, are the columns (the header is made from
+/// them, see [`frames_csv_header`]). Times in ms with three decimals, the timestamp in s with
+/// six, flags as 0/1, the status by name (`initialised`, `tracked`, `lost`, `coasted`,
+/// `reinitialised`: see `semloc_core::tracker::FrameStatus`). docs/outputs.md documents every
+/// column (a test checks it).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameRow {
+    /// Frame index in the sequence (0-based).
+    pub frame: u32,
+    /// Frame time (s from the source's time zero).
+    #[serde(serialize_with = "fixed6")]
+    pub timestamp_s: f64,
+    /// Decoding both images (ms; in parallel: the slower of the two).
+    #[serde(serialize_with = "fixed3")]
+    pub load_ms: f64,
+    /// ORB extraction on the left image (ms).
+    #[serde(serialize_with = "fixed3")]
+    pub orb_left_ms: f64,
+    /// ORB extraction on the right image (ms).
+    #[serde(serialize_with = "fixed3")]
+    pub orb_right_ms: f64,
+    /// Wall time of the parallel load + extraction step (ms).
+    #[serde(serialize_with = "fixed3")]
+    pub extract_wall_ms: f64,
+    /// Stereo matching (ms).
+    #[serde(serialize_with = "fixed3")]
+    pub stereo_ms: f64,
+    /// Tracking: search, pose optimisation, keyframe, BA (ms).
+    #[serde(serialize_with = "fixed3")]
+    pub track_ms: f64,
+    /// Semantic segmentation by the network (ms; 0 without one).
+    #[serde(serialize_with = "fixed3")]
+    pub seg_ms: f64,
+    /// Wall time without image decoding (ms): what the ECU pipeline would spend.
+    #[serde(serialize_with = "fixed3")]
+    pub compute_ms: f64,
+    /// Wall time of the whole frame, loading included (ms).
+    #[serde(serialize_with = "fixed3")]
+    pub total_ms: f64,
+    /// Left features with a stereo match.
+    pub stereo_matches: u32,
+    /// Landmark matches found by the projection search (final pass).
+    pub matched: u32,
+    /// Matches that survived pose optimisation.
+    pub inliers: u32,
+    /// 1 when the frame became a keyframe.
+    pub keyframe: u8,
+    /// 1 on the frame where tracking failed.
+    pub lost: u8,
+    /// 1 when the map was (re-)initialised on this frame.
+    pub initialised: u8,
+    /// Live landmarks after the frame.
+    pub landmarks: u32,
+    /// Keyframes in the map after the frame.
+    pub keyframes: u32,
+    /// Local BA iterations run.
+    pub ba_iterations: u32,
+    /// Features dropped by semantic culling.
+    pub culled: u32,
+    /// Features whose EM association differs from the nearest-neighbour candidate.
+    pub em_changed: u32,
+    /// Motion-aware semantics: dynamic-class features used as parked.
+    pub parked: u32,
+    /// Motion-aware semantics: features removed as moving.
+    pub moving: u32,
+    /// Motion-aware semantics: features removed as unproven.
+    pub unproven: u32,
+    /// How the pose was obtained.
+    pub status: &'static str,
+}
+
+fn fixed3<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(&format_args!("{v:.3}"))
+}
+
+fn fixed6<S: serde::Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(&format_args!("{v:.6}"))
+}
+
+impl FrameRow {
+    /// The row of frame record `r`.
+    pub fn of(r: &FrameRecord) -> Self {
+        let (o, rep) = (&r.output, &r.output.report);
+        let s = o.times;
+        Self {
+            frame: rep.frame_index,
+            timestamp_s: r.timestamp_s,
+            load_ms: s.load_ms,
+            orb_left_ms: s.orb_left_ms,
+            orb_right_ms: s.orb_right_ms,
+            extract_wall_ms: s.extract_wall_ms,
+            stereo_ms: s.stereo_ms,
+            track_ms: s.track_ms,
+            seg_ms: s.seg_ms,
+            compute_ms: s.compute_ms,
+            total_ms: s.total_ms,
+            stereo_matches: o.stereo.matched,
+            matched: rep.matched,
+            inliers: rep.inliers,
+            keyframe: u8::from(rep.keyframe),
+            lost: u8::from(rep.lost),
+            initialised: u8::from(rep.initialised),
+            landmarks: rep.landmarks,
+            keyframes: rep.keyframes,
+            ba_iterations: rep.ba_iterations,
+            culled: o.culled,
+            em_changed: rep.em_changed,
+            parked: rep.motion.parked_features,
+            moving: rep.motion.moving_features,
+            unproven: rep.motion.unproven_features,
+            status: rep.status.name(),
+        }
+    }
+}
+
+/// `row` as CSV (`header`: the header line before it), newline included, ready for one write.
+fn csv_text(row: &FrameRow, header: bool) -> Result<String, csv::Error> {
+    let mut w = csv::WriterBuilder::new().has_headers(header).from_writer(Vec::new());
+    w.serialize(row)?;
+    let bytes = w.into_inner().map_err(|e| csv::Error::from(e.into_error()))?;
+    // Every field is a number or an ASCII name.
+    Ok(String::from_utf8_lossy(&bytes).into_owned())
+}
+
+/// The header line of `frames.csv` (no newline): [`FrameRow`]'s field names.
+pub fn frames_csv_header() -> &'static str {
+    static HEADER: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    HEADER.get_or_init(|| {
+        let text = csv_text(&FrameRow::default(), true).unwrap_or_default();
+        text.lines().next().unwrap_or_default().to_owned()
+    })
+}
 
 /// What `summary.json` holds.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -216,43 +340,13 @@ fn motion_summary(frames: &[FrameRecord], stats: &TrackerStats) -> MotionSummary
     }
 }
 
-/// One `frames.csv` row (newline included): times in ms with three decimals, timestamp with
-/// six, flags as 0/1, the status by name.
-pub fn frames_csv_row(r: &FrameRecord) -> String {
-    let (o, t) = (&r.output, r.timestamp_s);
-    let (s, rep) = (o.times, o.report);
-    format!(
-        "{},{t:.6},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-        rep.frame_index,
-        s.load_ms,
-        s.orb_left_ms,
-        s.orb_right_ms,
-        s.extract_wall_ms,
-        s.stereo_ms,
-        s.track_ms,
-        s.seg_ms,
-        s.compute_ms,
-        s.total_ms,
-        o.stereo.matched,
-        rep.matched,
-        rep.inliers,
-        u8::from(rep.keyframe),
-        u8::from(rep.lost),
-        u8::from(rep.initialised),
-        rep.landmarks,
-        rep.keyframes,
-        rep.ba_iterations,
-        o.culled,
-        rep.em_changed,
-        rep.motion.parked_features,
-        rep.motion.moving_features,
-        rep.motion.unproven_features,
-        rep.status.name()
-    )
+/// One `frames.csv` row (newline included): [`FrameRow::of`] `r` written by the `csv` crate.
+pub fn frames_csv_row(r: &FrameRecord) -> Result<String, csv::Error> {
+    csv_text(&FrameRow::of(r), false)
 }
 
 /// Evaluates `poses` against `gt` (the same length, at least three poses) and writes
-/// `eval.json` and `plots/` into `out`; the evaluation's warnings (e.g. a large alignment
+/// `eval.json` and `plots/` into `out` (`times_s`: each frame's time for the over-time plots); the evaluation's warnings (e.g. a large alignment
 /// rotation) are appended to `warnings`. Returns the report when the evaluation worked, and
 /// the error when it or writing it failed (both when only the writing failed).
 pub fn write_eval(
@@ -260,6 +354,7 @@ pub fn write_eval(
     gt: &[Se3],
     poses: &[Se3],
     align: Align,
+    times_s: &[f64],
     warnings: &mut Vec<String>,
 ) -> (Option<EvalReport>, Option<RunError>) {
     let report = match evaluate(gt, poses, align) {
@@ -274,7 +369,7 @@ pub fn write_eval(
     if let Err(source) = std::fs::create_dir_all(&plots) {
         return (Some(report), Some(RunError::Create { path: plots, source }));
     }
-    if let Err(e) = crate::plot::write_eval_plots(&plots, gt, &report) {
+    if let Err(e) = crate::plot::write_eval_plots(&plots, gt, &report, Some(times_s)) {
         return (Some(report), Some(RunError::Plot(e)));
     }
     (Some(report), None)
@@ -284,4 +379,40 @@ pub fn write_eval(
 pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), RunError> {
     let text = serde_json::to_string_pretty(value)?;
     super::stream::write_atomic(path, text.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The header is the published column list (README, scripts), now made from [`FrameRow`].
+    #[test]
+    fn frames_csv_header_is_the_published_one() {
+        assert_eq!(
+            frames_csv_header(),
+            "frame,timestamp_s,load_ms,orb_left_ms,orb_right_ms,extract_wall_ms,stereo_ms,\
+             track_ms,seg_ms,compute_ms,total_ms,stereo_matches,matched,inliers,keyframe,lost,\
+             initialised,landmarks,keyframes,ba_iterations,culled,em_changed,parked,moving,\
+             unproven,status"
+        );
+    }
+
+    /// A row: one line, fixed decimals, flags as 0/1, the status by name.
+    #[test]
+    fn frames_csv_row_formats_like_before() {
+        let row = FrameRow {
+            frame: 7,
+            timestamp_s: 0.7,
+            load_ms: 1.23456,
+            keyframe: 1,
+            status: "tracked",
+            ..FrameRow::default()
+        };
+        let text = csv_text(&row, false).unwrap();
+        assert_eq!(
+            text,
+            "7,0.700000,1.235,0.000,0.000,0.000,0.000,0.000,0.000,0.000,0.000,0,0,0,1,0,0,0,0,0,\
+             0,0,0,0,0,tracked\n"
+        );
+    }
 }

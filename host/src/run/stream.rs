@@ -19,7 +19,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use super::{FrameRecord, RunError, FRAMES_CSV_HEADER};
+use super::{frames_csv_header, FrameRecord, RunError};
 
 /// Writes `bytes` to `path` through `path`'s folder: a temporary `.NAME.tmp` file, flushed to
 /// disk, then renamed over `path`. On failure the temporary file is removed and `path` is
@@ -100,7 +100,10 @@ impl StreamWriter {
         Ok(Self {
             kitti: LineFile::create(out.join("trajectory.txt"), None)?,
             tum: LineFile::create(out.join("trajectory_tum.txt"), Some(crate::traj::TUM_HEADER))?,
-            csv: LineFile::create(out.join("frames.csv"), Some(&format!("{FRAMES_CSV_HEADER}\n")))?,
+            csv: LineFile::create(
+                out.join("frames.csv"),
+                Some(&format!("{}\n", frames_csv_header())),
+            )?,
             tum_time_origin_s,
             failed: false,
         })
@@ -113,10 +116,14 @@ impl StreamWriter {
             return Ok(());
         }
         let pose = r.output.report.t_wc;
+        let row = super::outputs::frames_csv_row(r).map_err(|e| {
+            self.failed = true;
+            RunError::Write { path: self.csv.path.clone(), source: std::io::Error::other(e) }
+        })?;
         let lines = [
             crate::traj::format_kitti(&[pose]),
             crate::traj::format_tum_line(self.tum_time_origin_s + r.timestamp_s, &pose),
-            super::outputs::frames_csv_row(r),
+            row,
         ];
         let before = [self.kitti.len, self.tum.len, self.csv.len];
         for (i, line) in lines.iter().enumerate() {
