@@ -88,21 +88,6 @@ impl From<PairArg> for CameraPair {
     }
 }
 
-/// Opens the dataset the arguments name.
-pub fn open(
-    dataset: &std::path::Path,
-    seq: Option<&str>,
-    drive: Option<&str>,
-    pair: Option<PairArg>,
-) -> Result<Sequence> {
-    let pair = pair.map(CameraPair::from);
-    Ok(match (seq, drive) {
-        (Some(s), _) => Sequence::open_odometry(dataset, s, pair)?,
-        (None, Some(d)) => Sequence::open_raw(dataset, d, pair)?,
-        (None, None) => Sequence::open(dataset, pair)?,
-    })
-}
-
 /// Runs `semloc info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
     let seq = args.data.open_with_camera(settings_camera(args.config.as_deref())?)?;

@@ -324,7 +324,7 @@ fn gt_line(
         }
     }
     let q = Quaternion::new(v[3], v[4], v[5], v[6]);
-    if !(q.norm() > 1e-6) {
+    if q.norm() <= 1e-6 {
         return Err(DatasetError::Parse {
             path: path.to_path_buf(),
             line,

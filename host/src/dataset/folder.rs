@@ -218,7 +218,7 @@ fn tum_poses(
     let mut bad = bad;
     for (k, r) in rows.iter().enumerate() {
         let q = Quaternion::new(r[7], r[4], r[5], r[6]);
-        let problem = if !(q.norm() > 1e-6) {
+        let problem = if q.norm() <= 1e-6 {
             Some("the quaternion has zero length")
         } else if samples.last().is_some_and(|s| r[0] <= s.0) {
             Some("the time is not after the previous line's")
