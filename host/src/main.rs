@@ -25,7 +25,7 @@ struct Cli {
 enum Command {
     /// Evaluate an estimated trajectory against ground truth (KITTI devkit t_rel/r_rel, ATE).
     Eval(cli::eval::EvalArgs),
-    /// Describe what a KITTI dataset folder (odometry or raw layout) holds.
+    /// Describe what a dataset folder (KITTI odometry or raw, stereo folder, EuRoC MAV) holds.
     Info(cli::info::InfoArgs),
     /// The settings file: print the defaults (every key documented), check a file, or convert
     /// an ORB-SLAM2 YAML file.
@@ -33,7 +33,7 @@ enum Command {
     /// Write a dataset's ground truth as KITTI poses and TUM (recording times), for evo or the
     /// devkit.
     Gt(cli::gt::GtArgs),
-    /// Run the stereo tracker on a KITTI sequence; write trajectory, timings and evaluation.
+    /// Run the stereo tracker on a sequence; write trajectory, timings and evaluation.
     Run(cli::run::RunArgs),
     /// The main job on an embedded default: a synthetic high-traffic drive tracked without and
     /// with semantics, side by side.

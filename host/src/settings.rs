@@ -616,27 +616,58 @@ pub fn import_orbslam2_str(text: &str, path: &Path) -> Result<Imported, Settings
 
 /// One top-level entry of an OpenCV `FileStorage` YAML file.
 #[derive(Debug, Clone, PartialEq)]
-struct YamlEntry {
-    key: String,
-    line: usize,
-    value: YamlValue,
+pub(crate) struct YamlEntry {
+    /// The key, as written.
+    pub(crate) key: String,
+    /// 1-based line of the key.
+    pub(crate) line: usize,
+    /// Its value.
+    pub(crate) value: YamlValue,
 }
 
+/// The value of a [`YamlEntry`].
 #[derive(Debug, Clone, PartialEq)]
-enum YamlValue {
+pub(crate) enum YamlValue {
+    /// Everything after `key:` on its line, quotes removed (a flow list such as
+    /// `[752, 480]` stays text: see [`number_list`]).
     Scalar(String),
-    /// `!!opencv-matrix` with its data, row-major.
+    /// `!!opencv-matrix`, or a plain indented block with `rows`, `cols` and `data` (EuRoC's
+    /// `sensor.yaml`), with its data, row-major.
     Matrix {
+        /// Rows.
         rows: usize,
+        /// Columns.
         cols: usize,
+        /// `rows × cols` values, row-major.
         data: Vec<f64>,
     },
 }
 
-/// Reads the subset of YAML that OpenCV's `FileStorage` writes and ORB-SLAM2's settings use:
-/// a `%YAML:1.0` header, `key: value` lines at the left margin, `#` comments, and
-/// `!!opencv-matrix` blocks (`rows`, `cols`, `dt`, `data: [..]` over one or more lines).
-fn parse_opencv_yaml(text: &str, path: &Path) -> Result<Vec<YamlEntry>, SettingsError> {
+/// The numbers of a flow list scalar, `[458.654, 457.296, 367.215, 248.375]`.
+pub(crate) fn number_list(s: &str) -> Result<Vec<f64>, String> {
+    let inner = s
+        .trim()
+        .strip_prefix('[')
+        .and_then(|r| r.strip_suffix(']'))
+        .ok_or_else(|| format!("`{s}` is not a [..] list"))?;
+    inner
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .map(|t| match t.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(format!("list value `{t}` is not a finite number")),
+        })
+        .collect()
+}
+
+/// Reads the subset of YAML that OpenCV's `FileStorage` writes, ORB-SLAM2's settings and the
+/// EuRoC/ASL `sensor.yaml` files use: an optional `%YAML:1.0` header, `key: value` lines at the
+/// left margin, `#` comments, `!!opencv-matrix` blocks (`rows`, `cols`, `dt`, `data: [..]` over
+/// one or more lines), and the same block without the tag under a key with no value on its
+/// own line (`T_BS:` then indented `cols: 4`, `rows: 4`, `data: [..]`). Flow lists stay scalars
+/// ([`number_list`] reads them).
+pub(crate) fn parse_opencv_yaml(text: &str, path: &Path) -> Result<Vec<YamlEntry>, SettingsError> {
     let err =
         |line: usize, msg: String| SettingsError::Yaml { path: path.to_path_buf(), line, msg };
     let mut out: Vec<YamlEntry> = Vec::new();
@@ -663,7 +694,9 @@ fn parse_opencv_yaml(text: &str, path: &Path) -> Result<Vec<YamlEntry>, Settings
         if out.iter().any(|e| e.key == key) {
             return Err(err(n, format!("{key} is given twice")));
         }
-        let value = if value.starts_with("!!opencv-matrix") {
+        let block_follows = value.is_empty()
+            && lines.get(i).is_some_and(|l| strip_comment(l).starts_with([' ', '\t']));
+        let value = if value.starts_with("!!opencv-matrix") || block_follows {
             let mut body = String::new();
             while i < lines.len() {
                 let l = strip_comment(lines[i]);

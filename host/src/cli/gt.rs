@@ -8,7 +8,7 @@ use clap::Args;
 use semloc::dataset::Sequence;
 use semloc::run::{prepare_output_dir, write_atomic};
 
-use super::info::DatasetArgs;
+use super::info::{settings_camera, DatasetArgs};
 
 /// The files `semloc gt` writes (and, with `--force`, replaces).
 pub const GT_OUTPUTS: &[&str] = &["gt.txt", "gt_tum.txt", "times.txt"];
@@ -27,6 +27,10 @@ pub struct GtArgs {
     /// Replace the files a previous `semloc gt` wrote in --out (other files are kept).
     #[arg(long)]
     pub force: bool,
+    /// Settings file (TOML) whose [camera] section calibrates a stereo folder without
+    /// calib.txt (the other sections are not used here).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
 }
 
 /// What `semloc gt` wrote.
@@ -52,7 +56,9 @@ pub fn write_gt(
         match &seq.gt_problem {
             Some(p) => bail!("{} has no usable ground truth: {p}", seq.root.display()),
             None => bail!(
-                "{} has no ground truth (odometry: poses/XX.txt beside sequences/; raw: oxts/data)",
+                "{} has no ground truth (odometry: poses/XX.txt beside sequences/; raw: \
+                 oxts/data; stereo folder: gt.txt or gt_tum.txt; EuRoC: \
+                 mav0/state_groundtruth_estimate0/data.csv)",
                 seq.root.display()
             ),
         }
@@ -84,7 +90,10 @@ pub fn write_gt(
 
 /// Runs `semloc gt`.
 pub fn run(args: &GtArgs) -> Result<()> {
-    let seq = args.data.open()?;
+    let seq = args.data.open_with_camera(settings_camera(args.config.as_deref())?)?;
+    for n in &seq.notes {
+        eprintln!("note: {n}");
+    }
     let (w, warnings) = write_gt(&seq, &args.out, args.force)?;
     super::print_warnings(&warnings);
     super::write_stdout(&format!(

@@ -1,17 +1,19 @@
-//! `semloc info`: what a KITTI dataset folder holds.
+//! `semloc info`: what a dataset folder holds.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use semloc::dataset::{CameraPair, Sequence};
+use semloc::dataset::{CameraPair, Sequence, StereoCalib};
 
 /// Which dataset a command reads: shared by `info`, `run` and `bench`.
 #[derive(Args, Debug)]
 pub struct DatasetArgs {
     /// Dataset folder: a KITTI odometry root (holding `sequences/`, use with --seq), a sequence
-    /// folder (`.../sequences/00`), a KITTI raw root or date folder (use with --drive), or a raw
-    /// drive folder (`..._drive_0005_sync`).
+    /// folder (`.../sequences/00`), a KITTI raw root or date folder (use with --drive), a raw
+    /// drive folder (`..._drive_0005_sync`), a stereo folder (`left/`, `right/`, rectified
+    /// images; calibration from its calib.txt or --config's [camera]) or a EuRoC MAV sequence
+    /// (the folder holding `mav0`, or `mav0`).
     #[arg(value_name = "DATASET")]
     pub dataset: PathBuf,
     /// Odometry sequence number, e.g. `00` (odometry roots only).
@@ -29,8 +31,28 @@ pub struct DatasetArgs {
 impl DatasetArgs {
     /// Opens the dataset the arguments name.
     pub fn open(&self) -> Result<Sequence> {
-        open(&self.dataset, self.seq.as_deref(), self.drive.as_deref(), self.pair)
+        self.open_with_camera(None)
     }
+
+    /// Opens the dataset with the settings file's camera (a stereo folder's calibration when
+    /// given). The caller prints [`Sequence::notes`].
+    pub fn open_with_camera(&self, camera: Option<StereoCalib>) -> Result<Sequence> {
+        let pair = self.pair.map(CameraPair::from);
+        let seq = match (self.seq.as_deref(), self.drive.as_deref()) {
+            (Some(s), _) => Sequence::open_odometry(&self.dataset, s, pair)?,
+            (None, Some(d)) => Sequence::open_raw(&self.dataset, d, pair)?,
+            (None, None) => Sequence::open_with_camera(&self.dataset, pair, camera)?,
+        };
+        Ok(seq)
+    }
+}
+
+/// The `[camera]` of a settings file, for commands that read only the camera from it.
+pub fn settings_camera(config: Option<&std::path::Path>) -> Result<Option<StereoCalib>> {
+    Ok(match config {
+        Some(p) => semloc::settings::Settings::from_toml_file(p)?.camera.map(|c| c.calib()),
+        None => None,
+    })
 }
 
 /// Arguments of `semloc info`.
@@ -42,6 +64,10 @@ pub struct InfoArgs {
     /// Print the summary as JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Settings file (TOML) whose [camera] section calibrates a stereo folder without
+    /// calib.txt (the other sections are not used here).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
 }
 
 /// `--pair` values.
@@ -62,24 +88,9 @@ impl From<PairArg> for CameraPair {
     }
 }
 
-/// Opens the dataset the arguments name.
-pub fn open(
-    dataset: &std::path::Path,
-    seq: Option<&str>,
-    drive: Option<&str>,
-    pair: Option<PairArg>,
-) -> Result<Sequence> {
-    let pair = pair.map(CameraPair::from);
-    Ok(match (seq, drive) {
-        (Some(s), _) => Sequence::open_odometry(dataset, s, pair)?,
-        (None, Some(d)) => Sequence::open_raw(dataset, d, pair)?,
-        (None, None) => Sequence::open(dataset, pair)?,
-    })
-}
-
 /// Runs `semloc info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
-    let seq = args.data.open()?;
+    let seq = args.data.open_with_camera(settings_camera(args.config.as_deref())?)?;
     let summary = seq.summary();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&summary)?);

@@ -169,7 +169,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
             );
         }
     }
-    let seq = args.data.open()?;
+    let seq = args.data.open_with_camera(settings.camera.as_ref().map(|c| c.calib()))?;
+    for n in &seq.notes {
+        eprintln!("note: {n}");
+    }
     let mut tracker = settings.tracker;
     if let Some(n) = args.ransac_iterations {
         tracker.ransac_iterations = n;

@@ -201,8 +201,8 @@ pub enum DatasetError {
         /// The folder that should hold images.
         path: PathBuf,
     },
-    /// A folder is neither a KITTI odometry nor a KITTI raw layout (or is ambiguous).
-    #[error("{}: not a KITTI dataset folder: {msg}", path.display())]
+    /// A folder is none of the layouts semloc reads (or is ambiguous).
+    #[error("{}: not a dataset folder semloc reads: {msg}", path.display())]
     UnknownLayout {
         /// The folder.
         path: PathBuf,
@@ -226,6 +226,70 @@ pub enum DatasetError {
         /// What the folder is.
         found: String,
     },
+    /// An image of a stereo folder has no image of the same name on the other side.
+    #[error("{}: no image of the same name in {}", path.display(), other_dir.display())]
+    UnpairedImage {
+        /// The image without a partner.
+        path: PathBuf,
+        /// The other camera's folder.
+        other_dir: PathBuf,
+    },
+    /// A time file does not have exactly one time per image.
+    #[error("{}: {times} times for {images} images (one time per image, in frame order)", path.display())]
+    TimesCountMismatch {
+        /// The time file.
+        path: PathBuf,
+        /// Times found.
+        times: usize,
+        /// Images found.
+        images: usize,
+    },
+    /// A stereo folder has no calibration and none was given.
+    #[error(
+        "{}: no calibration: add calib.txt (KITTI format, P0 and P1 of the rectified pair) or          pass --config FILE with a [camera] section (fx, fy, cx, cy, baseline or bf;          `semloc config --print-defaults` shows it)",
+        path.display()
+    )]
+    NoCalibration {
+        /// The stereo folder.
+        path: PathBuf,
+    },
+    /// A camera timestamp of a stereo pair has no equal timestamp in the other camera's list.
+    #[error(
+        "{}:{line}: timestamp {timestamp_ns} ns has no image of the same time in {}",
+        path.display(),
+        other.display()
+    )]
+    UnpairedTimestamp {
+        /// The list holding the timestamp (`camN/data.csv`).
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// The timestamp, ns.
+        timestamp_ns: i64,
+        /// The other camera's list.
+        other: PathBuf,
+    },
+    /// The ground truth does not reach a frame's time.
+    #[error("{}: no ground truth for frame {frame} (t = {time_s} s): {msg}", path.display())]
+    GtNotCovered {
+        /// The ground-truth file.
+        path: PathBuf,
+        /// The 0-based frame.
+        frame: usize,
+        /// Its time, s (the sequence's `times_s`).
+        time_s: f64,
+        /// Why.
+        msg: String,
+    },
+    /// `--pair` was given for a layout with a single stereo pair.
+    #[error(
+        "{}: --pair chooses between KITTI's grey and colour cameras; this folder has one          stereo pair (leave --pair out)",
+        path.display()
+    )]
+    PairNotAvailable {
+        /// The folder.
+        path: PathBuf,
+    },
     /// A frame index past the end of the sequence was asked for.
     #[error("{}: frame {index} asked for, the sequence has {frames}", path.display())]
     FrameOutOfRange {
@@ -239,6 +303,16 @@ pub enum DatasetError {
 }
 
 impl DatasetError {
+    /// Maps a settings-parser error on a YAML file (EuRoC `sensor.yaml`) to `Parse`.
+    pub(crate) fn from_yaml(path: &std::path::Path, e: crate::settings::SettingsError) -> Self {
+        match e {
+            crate::settings::SettingsError::Yaml { line, msg, .. } => {
+                DatasetError::Parse { path: path.to_path_buf(), line, msg }
+            }
+            other => DatasetError::Io { path: path.to_path_buf(), msg: other.to_string() },
+        }
+    }
+
     /// Maps an I/O error on `path` to `MissingFile` (not found) or `Io` (anything else).
     pub(crate) fn io(path: &std::path::Path, e: &std::io::Error) -> Self {
         if e.kind() == std::io::ErrorKind::NotFound {

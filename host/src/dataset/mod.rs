@@ -1,9 +1,9 @@
-//! KITTI dataset readers (odometry and raw layouts).
+//! Dataset readers: KITTI odometry and raw, generic stereo folders, EuRoC MAV.
 //!
 //! [`Sequence`] is one rectified stereo sequence: image paths, calibration, timestamps and,
 //! where the dataset has it, ground truth. Open one with [`Sequence::open_odometry`],
-//! [`Sequence::open_raw`] or [`Sequence::open`] (layout auto-detected), then read frames with
-//! [`Sequence::load_luma`].
+//! [`Sequence::open_raw`], [`Sequence::open_folder`], [`Sequence::open_euroc`] or
+//! [`Sequence::open`] (layout auto-detected), then read frames with [`Sequence::load_luma`].
 //!
 //! * Odometry: `sequences/XX/{image_0,image_1|image_2,image_3}/NNNNNN.png`, `calib.txt`
 //!   (`P0`..`P3`), `times.txt`, optional `poses/XX.txt`.
@@ -11,6 +11,11 @@
 //!   `DATE/DATE_drive_NNNN_sync/{image_0X/{data/*.png,timestamps.txt}, oxts/data/*.txt}`;
 //!   ground truth is derived from the OXTS records exactly as pykitti and the KITTI odometry
 //!   poses do (see [`oxts`] and [`raw`]).
+//! * Stereo folder: `left/`, `right/` (rectified images of equal names), `calib.txt` or the
+//!   settings file's `[camera]`, optional `times.txt`, `gt.txt` or `gt_tum.txt` (see [`folder`]).
+//! * EuRoC MAV: `mav0/cam{0,1}/{data.csv, sensor.yaml, data/*.png}` and
+//!   `mav0/state_groundtruth_estimate0/data.csv`; the distorted images are rectified on
+//!   loading (see [`euroc`] and [`rectify`]).
 //!
 //! Opening reads every text file and the first stereo pair's image headers; images are decoded
 //! only by [`Sequence::load_luma`]. Memory: the path lists and poses, O(frames). Every error is a
@@ -18,15 +23,19 @@
 
 mod calib;
 mod error;
+pub mod euroc;
+pub mod folder;
 pub mod luma;
 mod odometry;
 pub mod oxts;
 pub mod raw;
+pub mod rectify;
 #[cfg(test)]
 mod tests;
 mod text;
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use image::GrayImage;
 use semloc_core::geom::{GeomError, Se3, StereoCamera};
@@ -68,9 +77,25 @@ pub enum Layout {
     Odometry,
     /// KITTI raw (`DATE/DATE_drive_NNNN_sync`).
     Raw,
+    /// A generic stereo folder (`left/`, `right/`, rectified images).
+    Folder,
+    /// EuRoC MAV (`mav0/cam0`, `mav0/cam1`), rectified on loading.
+    Euroc,
 }
 
-/// Which stereo pair of the KITTI rig.
+impl Layout {
+    /// The layout's name as `semloc info` prints it.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Layout::Odometry => "KITTI odometry",
+            Layout::Raw => "KITTI raw",
+            Layout::Folder => "stereo folder",
+            Layout::Euroc => "EuRoC MAV",
+        }
+    }
+}
+
+/// Which stereo pair of the KITTI rig (the other layouts have one pair, reported as `Grey`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum CameraPair {
@@ -90,14 +115,16 @@ impl CameraPair {
     }
 }
 
-/// One rectified KITTI stereo sequence.
+/// One rectified stereo sequence.
 #[derive(Debug, Clone)]
 pub struct Sequence {
     /// Layout the sequence was read from.
     pub layout: Layout,
-    /// Sequence name: `00` for odometry, `2011_09_26_drive_0005_sync` for raw.
+    /// Sequence name: `00` for odometry, `2011_09_26_drive_0005_sync` for raw, the folder's
+    /// name for a stereo folder, the folder holding `mav0` for EuRoC.
     pub name: String,
-    /// The sequence folder (`.../sequences/00` or `.../DATE_drive_NNNN_sync`).
+    /// The sequence folder (`.../sequences/00`, `.../DATE_drive_NNNN_sync`, the stereo folder,
+    /// or EuRoC's `mav0`).
     pub root: PathBuf,
     /// The stereo pair in use.
     pub pair: CameraPair,
@@ -107,17 +134,21 @@ pub struct Sequence {
     pub left: Vec<PathBuf>,
     /// Right images, one per frame, in frame order.
     pub right: Vec<PathBuf>,
-    /// Frame times in seconds (odometry: `times.txt`; raw: relative to the first frame).
+    /// Frame times in seconds (odometry and stereo folders: `times.txt`; raw and EuRoC:
+    /// relative to the first frame).
     pub times_s: Vec<f64>,
     /// Recording time of `times_s`' zero, in seconds, so that `time_origin_s + times_s[i]` is
     /// frame `i`'s recording time (what TUM files carry). Raw: the first left-camera timestamp
     /// as seconds since 1970-01-01 00:00, the civil time of `timestamps.txt` read as UTC.
     /// Odometry: 0, because `times.txt` already is the recording time from the sequence start
-    /// (KITTI publishes no absolute time for the odometry sequences).
+    /// (KITTI publishes no absolute time for the odometry sequences). Stereo folder: 0
+    /// (`times.txt` is taken as the recording time). EuRoC: the first image's timestamp,
+    /// UNIX seconds.
     pub time_origin_s: f64,
     /// Camera-to-world poses of the left camera of the pair, one per frame, if the dataset has
     /// ground truth. Odometry grey: `poses/XX.txt` as is; odometry colour: the same trajectory
-    /// moved to camera 2 (`T₂ G T₂⁻¹`); raw: from OXTS, first pose identity.
+    /// moved to camera 2 (`T₂ G T₂⁻¹`); raw: from OXTS, first pose identity; stereo folder and
+    /// EuRoC: see [`folder`] and [`euroc`], first pose identity.
     ///
     /// When the ground-truth file is shorter than the sequence or has a bad line, this holds the
     /// poses before the problem (possibly none) and [`Sequence::gt_problem`] says what it was:
@@ -128,6 +159,12 @@ pub struct Sequence {
     pub gt_problem: Option<DatasetError>,
     /// Image size (width, height) in pixels, the same for every image.
     pub image_size: (u32, u32),
+    /// What the reader assumed or left out that a user should know (e.g. frame times at a
+    /// default rate because a stereo folder has no `times.txt`); `semloc info`, `run` and `gt`
+    /// print them.
+    pub notes: Vec<String>,
+    /// EuRoC: the rectification [`Sequence::load_luma`] applies to the distorted images.
+    pub remap: Option<Arc<rectify::StereoRemap>>,
 }
 
 /// What `semloc info` prints about a sequence.
@@ -143,7 +180,7 @@ pub struct DatasetSummary {
     pub frames: usize,
     /// Stereo pair in use.
     pub pair: CameraPair,
-    /// Folder names of the left and right camera (`image_0`, `image_02`, ...).
+    /// Folder names of the left and right camera (`image_0`, `image_02`, `left`, `cam0`, ...).
     pub cameras: [String; 2],
     /// Image width, pixels.
     pub width_px: u32,
@@ -163,22 +200,31 @@ pub struct DatasetSummary {
     /// Length of the ground-truth path (sum of distances between consecutive positions),
     /// metres; `None` without ground truth.
     pub gt_length_m: Option<f64>,
+    /// Whether the images are rectified on loading (EuRoC).
+    pub rectified_on_load: bool,
+    /// What the reader assumed ([`Sequence::notes`]).
+    pub notes: Vec<String>,
 }
 
 impl core::fmt::Display for DatasetSummary {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        let layout = match self.layout {
-            Layout::Odometry => "KITTI odometry",
-            Layout::Raw => "KITTI raw",
-        };
+        let layout = self.layout.describe();
         let c = &self.calib;
         writeln!(f, "{layout} sequence {} ({})", self.name, self.root.display())?;
         writeln!(f, "  frames:     {}", self.frames)?;
-        writeln!(
-            f,
-            "  cameras:    {} / {} ({:?} pair)",
-            self.cameras[0], self.cameras[1], self.pair
-        )?;
+        match self.layout {
+            Layout::Odometry | Layout::Raw => writeln!(
+                f,
+                "  cameras:    {} / {} ({:?} pair)",
+                self.cameras[0], self.cameras[1], self.pair
+            )?,
+            Layout::Folder | Layout::Euroc => {
+                writeln!(f, "  cameras:    {} / {}", self.cameras[0], self.cameras[1])?
+            }
+        }
+        if self.rectified_on_load {
+            writeln!(f, "  rectified:  on loading (Bouguet, alpha 0); the intrinsics below are the rectified camera")?;
+        }
         writeln!(f, "  image size: {}x{}", self.width_px, self.height_px)?;
         writeln!(
             f,
@@ -205,6 +251,9 @@ impl core::fmt::Display for DatasetSummary {
         }
         if let Some(p) = &self.gt_problem {
             write!(f, "\n  ground-truth problem: {p}")?;
+        }
+        for n in &self.notes {
+            write!(f, "\n  note: {n}")?;
         }
         Ok(())
     }
@@ -236,15 +285,54 @@ impl Sequence {
         raw::open(root, drive, pair)
     }
 
-    /// Opens whatever KITTI sequence `path` names, detecting the layout:
-    ///
-    /// * an odometry sequence folder (holds `calib.txt` or `image_0`/`image_2`), or an odometry
-    ///   root whose `sequences/` holds exactly one sequence;
-    /// * a raw drive folder (holds `oxts` or `image_0X`), a raw date folder with exactly one
-    ///   `*_drive_*_sync` folder, or a raw root with exactly one such date folder and drive.
+    /// Opens a generic stereo folder (`left/`, `right/`; see [`folder`]). `camera` (the
+    /// settings file's `[camera]`) is the calibration when given, else `calib.txt` is read;
+    /// with neither: [`DatasetError::NoCalibration`].
+    pub fn open_folder(root: &Path, camera: Option<StereoCalib>) -> Result<Self, DatasetError> {
+        folder::open(root, camera)
+    }
+
+    /// Opens a EuRoC MAV sequence (the folder holding `mav0`, or `mav0`; see [`euroc`]).
+    pub fn open_euroc(root: &Path) -> Result<Self, DatasetError> {
+        euroc::open(root)
+    }
+
+    /// [`Sequence::open_with_camera`] without a settings camera.
     pub fn open(path: &Path, pair: Option<CameraPair>) -> Result<Self, DatasetError> {
+        Self::open_with_camera(path, pair, None)
+    }
+
+    /// Opens whatever sequence `path` names, detecting the layout by the first rule that
+    /// matches:
+    ///
+    /// 1. EuRoC: `path/mav0/cam0` or `path/cam0` holds `data.csv` or `sensor.yaml`;
+    /// 2. stereo folder: `path/left/` and `path/right/` exist (`camera`, from the settings
+    ///    file, is its calibration when given);
+    /// 3. an odometry sequence folder (holds `calib.txt`, `times.txt` or `image_0`/`image_2`),
+    ///    or an odometry root whose `sequences/` holds exactly one sequence;
+    /// 4. a raw drive folder (holds `oxts` or `image_0X`), a raw date folder with exactly one
+    ///    `*_drive_*_sync` folder, or a raw root with exactly one such date folder and drive.
+    ///
+    /// `pair` applies to KITTI only; given for a stereo folder or EuRoC it is
+    /// [`DatasetError::PairNotAvailable`]. `camera` is only read for a stereo folder (a run
+    /// applies it to every layout itself).
+    pub fn open_with_camera(
+        path: &Path,
+        pair: Option<CameraPair>,
+        camera: Option<StereoCalib>,
+    ) -> Result<Self, DatasetError> {
         if !path.is_dir() {
             return Err(DatasetError::MissingFile { path: path.to_path_buf() });
+        }
+        let single_pair = euroc::mav_dir(path).is_some() || folder::is_folder(path);
+        if single_pair && pair.is_some() {
+            return Err(DatasetError::PairNotAvailable { path: path.to_path_buf() });
+        }
+        if euroc::mav_dir(path).is_some() {
+            return euroc::open(path);
+        }
+        if folder::is_folder(path) {
+            return folder::open(path, camera);
         }
         let has = |name: &str| path.join(name).exists();
         if has("calib.txt") || has("times.txt") || has("image_0") || has("image_2") {
@@ -285,7 +373,10 @@ impl Sequence {
         }
         Err(DatasetError::UnknownLayout {
             path: path.to_path_buf(),
-            msg: "no calib.txt, image_0X folders, oxts, sequences/ or DATE/ folder".into(),
+            msg: "looked for EuRoC MAV (mav0/cam0/data.csv), a stereo folder (left/ and right/), \
+                  KITTI odometry (calib.txt, image_0/image_2, or sequences/) and KITTI raw \
+                  (oxts, image_0X, calib_cam_to_cam.txt, or a YYYY_MM_DD folder); found none"
+                .into(),
         })
     }
 
@@ -305,6 +396,8 @@ impl Sequence {
         match self.layout {
             Layout::Odometry => [format!("image_{l}"), format!("image_{r}")],
             Layout::Raw => [format!("image_{l:02}"), format!("image_{r:02}")],
+            Layout::Folder => ["left".into(), "right".into()],
+            Layout::Euroc => ["cam0".into(), "cam1".into()],
         }
     }
 
@@ -312,20 +405,10 @@ impl Sequence {
     ///
     /// Grey PNGs are returned as stored; colour is converted with ITU-R BT.601 in Pillow's
     /// fixed-point form, `Y = (19595 R + 38470 G + 7471 B + 32768) >> 16` (see [`luma`]).
-    /// Both images must have the sequence's [`image_size`](Sequence::image_size).
+    /// Both images must have the sequence's [`image_size`](Sequence::image_size). EuRoC images
+    /// are returned rectified ([`Sequence::remap`]).
     pub fn load_luma(&self, i: usize) -> Result<(GrayImage, GrayImage), DatasetError> {
-        let (Some(lp), Some(rp)) = (self.left.get(i), self.right.get(i)) else {
-            return Err(DatasetError::FrameOutOfRange {
-                path: self.root.clone(),
-                index: i,
-                frames: self.len(),
-            });
-        };
-        let l = luma::load_luma_file(lp)?;
-        self.check_size(lp, &l)?;
-        let r = luma::load_luma_file(rp)?;
-        self.check_size(rp, &r)?;
-        Ok((l, r))
+        Ok((self.load_luma_side(i, false)?, self.load_luma_side(i, true)?))
     }
 
     /// One image of frame `i` as luma: the left one, or the right one when `right` is true.
@@ -341,7 +424,11 @@ impl Sequence {
         };
         let img = luma::load_luma_file(p)?;
         self.check_size(p, &img)?;
-        Ok(img)
+        Ok(match &self.remap {
+            Some(m) if right => m.right.apply(&img),
+            Some(m) => m.left.apply(&img),
+            None => img,
+        })
     }
 
     /// The semantic label image of frame `i`'s left camera, if the sequence has labels:
@@ -426,6 +513,8 @@ impl Sequence {
             gt_problem: self.gt_problem.as_ref().map(ToString::to_string),
             duration_s: self.duration_s(),
             gt_length_m: self.gt_length_m(),
+            rectified_on_load: self.remap.is_some(),
+            notes: self.notes.clone(),
         }
     }
 }

@@ -124,5 +124,7 @@ pub(crate) fn open(
         gt,
         gt_problem,
         image_size,
+        notes: Vec::new(),
+        remap: None,
     })
 }

@@ -267,6 +267,8 @@ pub(crate) fn open(
         gt,
         gt_problem,
         image_size,
+        notes: Vec::new(),
+        remap: None,
     })
 }
 
