@@ -14,8 +14,8 @@
 //! the point's keyframe observations (CamVid ids, see `semloc_core::seg::CLASS_NAMES`), 255 when
 //! the run had no labels; the colour is the CamVid palette's, grey for 255.
 
+use core::fmt::Write as _;
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::Path;
 
 use semloc_core::map::Map;
