@@ -2,45 +2,19 @@
 //! EuRoC MAV sequence, built from one synthetic KITTI-layout sequence (`semloc synth`): the
 //! same images and camera in each layout must give the same answers.
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
 
+use common::{s, semloc, synth, text};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
-
-fn semloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// `ROOT/sequences/00` (8 frames, static street) and `ROOT/poses/00.txt`, written once.
 fn synth_root() -> &'static Path {
     static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    ROOT.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let o = semloc(&[
-            "synth",
-            "--out",
-            s(dir.path()),
-            "--frames",
-            "8",
-            "--dynamics",
-            "static",
-            "--seed",
-            "3",
-        ]);
-        assert!(o.status.success(), "synth: {}", text(&o));
-        dir
-    })
-    .path()
+    ROOT.get_or_init(|| synth("8", "static", "3")).path()
 }
 
 fn seq_dir() -> PathBuf {

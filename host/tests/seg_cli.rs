@@ -1,22 +1,12 @@
 //! The segmentation subcommands end to end on a tiny synthetic network (no outside data):
 //! `convert`, `segment`, `verify-seg`, and their errors naming the file.
 
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Output};
 
+use common::{s, semloc, text};
 use semloc::nn::fixtures::write_tiny;
-
-fn semloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// A smooth grey test image with some structure.
 fn write_image(path: &Path, w: u32, h: u32) {

@@ -1,42 +1,17 @@
 //! The settings file (`semloc config`, `run --config`, `run --orbslam2-settings`) and
 //! `semloc gt`, through the binary, on a small synthetic sequence.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-fn semloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
-}
-
-fn text(o: &Output) -> String {
-    format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
+use common::{s, semloc, synth, text};
 
 /// `ROOT/sequences/00` (8 frames, static street) and `ROOT/poses/00.txt`, written once.
 fn synth_root() -> &'static Path {
     static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    ROOT.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let o = semloc(&[
-            "synth",
-            "--out",
-            s(dir.path()),
-            "--frames",
-            "8",
-            "--dynamics",
-            "static",
-            "--seed",
-            "5",
-        ]);
-        assert!(o.status.success(), "synth: {}", text(&o));
-        dir
-    })
-    .path()
+    ROOT.get_or_init(|| synth("8", "static", "5")).path()
 }
 
 fn summary(out: &Path) -> serde_json::Value {

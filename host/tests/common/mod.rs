@@ -21,25 +21,28 @@ pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// A `semloc synth` KITTI odometry root in a temporary folder: `ROOT/sequences/00` and
+/// `ROOT/poses/00.txt`, `frames` frames of `dynamics` traffic from `seed`.
+pub fn synth(frames: &str, dynamics: &str, seed: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let o = semloc(&[
+        "synth",
+        "--out",
+        s(dir.path()),
+        "--frames",
+        frames,
+        "--dynamics",
+        dynamics,
+        "--seed",
+        seed,
+    ]);
+    assert!(o.status.success(), "synth: {}", text(&o));
+    dir
+}
+
 /// `ROOT/sequences/00` of `semloc synth` (10 frames, a street lined with parked cars, with
 /// `semantic/` labels) and `ROOT/poses/00.txt`, written once per test binary.
 pub fn parked_root() -> &'static Path {
     static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    ROOT.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let o = semloc(&[
-            "synth",
-            "--out",
-            s(dir.path()),
-            "--frames",
-            "10",
-            "--dynamics",
-            "parked",
-            "--seed",
-            "11",
-        ]);
-        assert!(o.status.success(), "synth: {}", text(&o));
-        dir
-    })
-    .path()
+    ROOT.get_or_init(|| synth("10", "parked", "11")).path()
 }
