@@ -234,6 +234,17 @@ impl PoseProblem {
         }
     }
 
+    /// The features with an observation the last solve classified as an outlier (a feature
+    /// may appear more than once under EM, one observation per candidate).
+    pub fn outlier_features(&self) -> impl Iterator<Item = usize> + '_ {
+        let n = self.obs.len();
+        self.feat[..n]
+            .iter()
+            .zip(&self.outlier[..n])
+            .filter(|(_, &o)| o)
+            .map(|(&j, _)| usize::from(j))
+    }
+
     /// Number of cells of a 16x8 grid over a `width`x`height` image holding at least one
     /// inlier of the last solve.
     pub fn inlier_coverage(&self, feats: &[Feature], width: f32, height: f32) -> u32 {

@@ -161,6 +161,20 @@ impl FrameStatus {
     }
 }
 
+/// How a feature of the last processed frame served its pose ([`Tracker::feature_use`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FeatureUse {
+    /// Matched to a map point and kept by the final pose solve.
+    Inlier,
+    /// Matched to a map point, rejected by the final pose solve (reprojection χ² over the
+    /// threshold).
+    Outlier,
+    /// Not matched to any map point (or the frame was not tracked against a map).
+    #[default]
+    Unmatched,
+}
+
 /// What happened on one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameReport {
@@ -283,6 +297,9 @@ pub struct Tracker {
     em: EmScratch,
     motion_aware: bool,
     motion: MotionScratch,
+    /// Whether the last frame was tracked against the map (its matches and the pose
+    /// problem's outlier flags describe it).
+    solved: bool,
 }
 
 /// Memory budget of one tracker (bytes), checked at compile time: the ECU target gives the
@@ -328,6 +345,7 @@ impl Tracker {
             em: EmScratch::new(),
             motion_aware: false,
             motion: MotionScratch::new(),
+            solved: false,
         })
     }
 
@@ -350,10 +368,34 @@ impl Tracker {
         &self.motion.state[..self.last_features.min(FRAME_CAPACITY)]
     }
 
+    /// How each feature of the last processed frame served its pose: writes the first
+    /// `out.len()` features' [`FeatureUse`] and returns how many were written (the frame's
+    /// feature count at most). On a frame that was not tracked against the map (initialised,
+    /// lost, coasted) every feature is [`FeatureUse::Unmatched`].
+    pub fn feature_use(&self, out: &mut [FeatureUse]) -> usize {
+        let n = self.last_features.min(FRAME_CAPACITY).min(out.len());
+        out[..n].fill(FeatureUse::Unmatched);
+        if !self.solved {
+            return n;
+        }
+        for j in self.problem.outlier_features() {
+            if let Some(u) = out[..n].get_mut(j) {
+                *u = FeatureUse::Outlier;
+            }
+        }
+        for (u, &id) in out[..n].iter_mut().zip(&self.matches.lm[..n]) {
+            if id != NO_LANDMARK {
+                *u = FeatureUse::Inlier;
+            }
+        }
+        n
+    }
+
     /// Forgets the map and the motion; the next frame initialises again at the identity.
     pub fn reset(&mut self) {
         self.map.clear();
         self.last_features = 0;
+        self.solved = false;
         self.state = TrackState::Uninitialised;
         self.frame_index = 0;
         self.t_cw = Se3::identity();
@@ -433,6 +475,7 @@ impl Tracker {
             motion: MotionReport::default(),
         };
         self.motion.reset(frame.features.len());
+        self.solved = false;
         let last = self.t_cw;
         // Every pose that feeds back into the next frame is re-orthonormalised: the
         // constant-velocity loop multiplies any drift of R from a rotation about threefold per
@@ -451,6 +494,7 @@ impl Tracker {
             }
             TrackState::Tracking => {
                 if self.track(frame, predicted, &mut rep) {
+                    self.solved = true;
                     self.velocity = renormalize(&self.t_cw.compose(&last.inverse()));
                     self.has_velocity = true;
                     if self.need_keyframe(frame, &rep) {

@@ -327,3 +327,54 @@ fn motion_aware_tracking_keeps_parked_cars_and_drops_a_moving_one() {
         assert!(s.parked_features > 0 && s.unproven_features + s.moving_features > 0, "{s:?}");
     });
 }
+
+#[test]
+fn feature_use_reports_inliers_and_rejected_outliers() {
+    run_on_big_stack(|| {
+        let mut rng = Rng::new(0x5eed_0f_f00d);
+        let pts = world(&mut rng);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        let mut uses = [FeatureUse::Unmatched; FRAME_CAPACITY];
+        let (mut shifted_in, mut shifted_out) = (0, 0);
+        for k in 0..12 {
+            let mut frame = render(&pts, &truth(k), &mut rng);
+            // Every 10th feature displaced by 3.5 px at its level's scale (stereo too, so its
+            // depth stays): inside the narrow search radius (4 px), but χ² = 12.25 against
+            // its landmark's projection, over the stereo threshold 7.81.
+            let shifted = |i: usize| i % 10 == 5;
+            if k > 0 {
+                for (i, f) in frame.features.iter_mut().enumerate() {
+                    if shifted(i) {
+                        let d = 3.5 * crate::frame::level_scale(f.level);
+                        f.x += d;
+                        f.ur += d;
+                    }
+                }
+            }
+            let rep = tracker.process(&frame);
+            let n = tracker.feature_use(&mut uses);
+            assert_eq!(n, frame.features.len());
+            let inliers = uses[..n].iter().filter(|&&u| u == FeatureUse::Inlier).count();
+            if k == 0 {
+                assert_eq!(rep.status, FrameStatus::Initialised);
+                assert!(uses[..n].iter().all(|&u| u == FeatureUse::Unmatched), "frame 0");
+                continue;
+            }
+            assert_eq!(rep.status, FrameStatus::Tracked, "frame {k}");
+            assert_eq!(inliers as u32, rep.inliers, "frame {k}: inliers");
+            for (_, u) in uses[..n].iter().enumerate().filter(|&(i, _)| shifted(i)) {
+                match u {
+                    FeatureUse::Inlier => shifted_in += 1,
+                    FeatureUse::Outlier => shifted_out += 1,
+                    FeatureUse::Unmatched => {}
+                }
+            }
+        }
+        std::println!("displaced: {shifted_out} outliers, {shifted_in} inliers");
+        assert!(shifted_out > 300, "{shifted_out} displaced features rejected as outliers");
+        assert!(shifted_in * 10 < shifted_out, "{shifted_in} displaced features kept as inliers");
+        // A shorter buffer gets the first features only.
+        let mut few = [FeatureUse::Unmatched; 3];
+        assert_eq!(tracker.feature_use(&mut few), 3);
+    });
+}
