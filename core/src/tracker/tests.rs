@@ -331,7 +331,7 @@ fn motion_aware_tracking_keeps_parked_cars_and_drops_a_moving_one() {
 #[test]
 fn feature_use_reports_inliers_and_rejected_outliers() {
     run_on_big_stack(|| {
-        let mut rng = Rng::new(0x5eed_0f_f00d);
+        let mut rng = Rng::new(0x005e_ed0f_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
         let mut uses = [FeatureUse::Unmatched; FRAME_CAPACITY];

@@ -75,6 +75,12 @@ pub struct RunArgs {
     /// run ends (also after an interruption).
     #[arg(long, value_name = "FILE.ply")]
     pub export_map: Option<PathBuf>,
+    /// Also record the run for the rerun viewer (`rerun FILE.rrd`): per frame the left image,
+    /// its segmentation, the features coloured by class and by inlier/outlier, the map points
+    /// by class, the estimated and ground-truth paths. Written as the run goes. Needs the
+    /// `rerun` cargo feature (on by default).
+    #[arg(long, value_name = "FILE.rrd")]
+    pub rerun: Option<PathBuf>,
 }
 
 /// `--assoc` values.
@@ -159,14 +165,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
     for n in &ignored {
         eprintln!("note: {}: {n}", settings_file.as_deref().unwrap_or(Path::new("")).display());
     }
-    if let Some(p) = &args.export_map {
+    for (flag, file) in [("--export-map", &args.export_map), ("--rerun", &args.rerun)] {
+        let Some(p) = file else { continue };
         let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
         if !dir.is_dir() {
-            anyhow::bail!(
-                "--export-map {}: the folder {} does not exist",
-                p.display(),
-                dir.display()
-            );
+            anyhow::bail!("{flag} {}: the folder {} does not exist", p.display(), dir.display());
         }
     }
     let seq = args.data.open_with_camera(settings.camera.as_ref().map(|c| c.calib()))?;
@@ -193,6 +196,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         align: args.align.into(),
         force: args.force,
         export_map: args.export_map.clone(),
+        rerun: args.rerun.clone(),
         ..RunConfig::new(&seq, &args.out)
     };
     let outcome = run_with_progress(cfg)?;

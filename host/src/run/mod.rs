@@ -18,6 +18,8 @@ pub mod outputs;
 pub mod provenance;
 pub mod stats;
 pub mod stream;
+#[cfg(feature = "rerun")]
+pub mod viewer;
 
 use std::path::{Path, PathBuf};
 
@@ -131,6 +133,9 @@ pub struct RunConfig<'a> {
     pub command_line: Vec<String>,
     /// Where to write the map points as PLY (`--export-map`), if anywhere.
     pub export_map: Option<PathBuf>,
+    /// Where to write the rerun viewer recording (`--rerun`), if anywhere; needs the `rerun`
+    /// cargo feature ([`RunError::ViewerUnavailable`] without it).
+    pub rerun: Option<PathBuf>,
 }
 
 impl<'a> RunConfig<'a> {
@@ -154,6 +159,7 @@ impl<'a> RunConfig<'a> {
             stop: None,
             command_line: Vec::new(),
             export_map: None,
+            rerun: None,
         }
     }
 
@@ -359,6 +365,16 @@ pub enum RunError {
     /// The network file could not be loaded.
     #[error(transparent)]
     Network(#[from] NnFileError),
+    /// `--rerun` was asked of a build without the `rerun` cargo feature.
+    #[error(
+        "--rerun {}: this semloc was built without the `rerun` feature; install it with its \
+         default features (cargo install semloc) or with --features rerun",
+        path.display()
+    )]
+    ViewerUnavailable {
+        /// The recording asked for.
+        path: PathBuf,
+    },
     /// The output folder holds files and `--force` was not given.
     #[error(
         "output folder {} is not empty ({}); choose another folder, or pass --force to replace \
@@ -581,7 +597,12 @@ pub fn run_observed(
         stop,
         command_line,
         export_map,
+        rerun,
     } = cfg;
+    #[cfg(not(feature = "rerun"))]
+    if let Some(path) = rerun {
+        return Err(RunError::ViewerUnavailable { path });
+    }
     let (w, h) = seq.image_size;
     if let Some(c) = &camera {
         let (cw, ch) = (c.width.unwrap_or(w), c.height.unwrap_or(h));
@@ -651,13 +672,28 @@ pub fn run_observed(
     };
 
     let mut map = export_map.as_ref().map(|_| map_export::MapCollector::new());
+    #[cfg(feature = "rerun")]
+    let mut viewer = match &rerun {
+        Some(path) => {
+            let gt = seq.gt.as_deref().map(|g| &g[..n.min(g.len())]);
+            Some(viewer::Recorder::create(path, &calib, w, h, gt)?)
+        }
+        None => None,
+    };
     let mut stream = stream::StreamWriter::create(&out, seq.time_origin_s)?;
+    let mut done = 0usize;
     let Tracked { frames, failure } =
         track_frames(&mut pipe, seq, n, stop.as_ref(), &mut |p: &Pipeline, r: &FrameRecord| {
             stream.append(r)?;
             if let Some(m) = map.as_mut() {
                 m.observe(p.tracker().map(), r.output.report.frame_index);
             }
+            #[cfg(feature = "rerun")]
+            if let Some(v) = viewer.as_mut() {
+                let left = seq.left(done)?;
+                v.record(p, &left, r)?;
+            }
+            done += 1;
             on_frame(r);
             Ok(())
         });
@@ -674,6 +710,20 @@ pub fn run_observed(
             )),
             Err(e) if failure.is_none() => failure = Some(RunFailure::Output(e)),
             Err(e) => warnings.push(format!("--export-map: {}", outputs::error_chain(&e))),
+        }
+    }
+
+    #[cfg(feature = "rerun")]
+    if let (Some(v), Some(path)) = (viewer, &rerun) {
+        match v.finish() {
+            Ok(()) => notices.push(format!(
+                "rerun: {} frames recorded to {} (open it with `rerun {}`)",
+                frames.len(),
+                path.display(),
+                path.display()
+            )),
+            Err(e) if failure.is_none() => failure = Some(RunFailure::Output(e)),
+            Err(e) => warnings.push(format!("--rerun: {}", outputs::error_chain(&e))),
         }
     }
 
