@@ -252,3 +252,55 @@ fn a_euroc_sequence_reads_gives_recording_time_ground_truth_and_runs() {
         text(&o)
     );
 }
+
+/// `semloc segment` on a distorted EuRoC sequence labels the left images rectified, as `run`
+/// tracks them: its labels equal those of the rectified image given as a file, not those of
+/// the raw one.
+#[test]
+fn segment_labels_euroc_images_rectified() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = euroc_fixture(dir.path());
+    for k in 0..2 {
+        let p = root.join(format!("mav0/cam{k}/sensor.yaml"));
+        let y = fs::read_to_string(&p).unwrap().replace(
+            "distortion_coefficients: [0.0, 0.0, 0.0, 0.0]",
+            "distortion_coefficients: [-0.25, 0.06, 0.0, 0.0]",
+        );
+        fs::write(&p, y).unwrap();
+    }
+    // 48x160: the synthetic 1241x376 frames down-scaled 1/8, the most the letterbox does.
+    let onnx = semloc::nn::fixtures::write_tiny(dir.path(), "tiny", 48, 160).unwrap();
+    let slm = dir.path().join("tiny.slm");
+    let o = semloc(&["convert", "--onnx", s(&onnx), "--out", s(&slm)]);
+    assert!(o.status.success(), "{}", text(&o));
+
+    let seq = semloc::dataset::Sequence::open(&root, None).unwrap();
+    let name = seq.left[0].file_stem().unwrap().to_str().unwrap().to_string();
+    let files = dir.path().join("files");
+    fs::create_dir_all(files.join("rect")).unwrap();
+    seq.load_luma_side(0, false)
+        .unwrap()
+        .save(files.join("rect").join(format!("{name}.png")))
+        .unwrap();
+    let labels = |input: &Path, out: &str| {
+        let out = dir.path().join(out);
+        let o =
+            semloc(&["segment", s(input), "--model", s(&slm), "--out", s(&out), "--limit", "1"]);
+        assert!(o.status.success(), "{}", text(&o));
+        image::open(out.join(format!("{name}_labels.png"))).unwrap().to_luma8()
+    };
+    let from_seq = labels(&root, "seq");
+    let o = semloc(&[
+        "segment",
+        s(&root),
+        "--model",
+        s(&slm),
+        "--out",
+        s(&dir.path().join("x")),
+        "--limit",
+        "1",
+    ]);
+    assert!(text(&o).contains("labelled rectified"), "{}", text(&o));
+    assert_eq!(from_seq, labels(&files.join("rect"), "rect"), "labels of the rectified image");
+    assert_ne!(from_seq, labels(&seq.left[0], "raw"), "labels of the raw image");
+}

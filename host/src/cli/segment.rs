@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use semloc::dataset::luma::load_luma_file;
+use semloc::dataset::Sequence;
 use semloc::nn::segment::{label_image, overlay_with_legend, to_frame, Segmenter};
 use semloc::nn::tract_ref::TractRef;
 use semloc::nn::SlmBlob;
@@ -16,8 +17,9 @@ use semloc_core::nn::graph::Kernels;
 /// Arguments of `semloc segment`.
 #[derive(Args, Debug)]
 pub struct SegmentArgs {
-    /// An image (PNG/JPEG), a folder of images, or a KITTI sequence folder (odometry sequence
-    /// or raw drive: its left camera).
+    /// An image (PNG/JPEG), a folder of images, or a sequence folder (KITTI odometry sequence
+    /// or raw drive, stereo folder, EuRoC MAV): its left camera, loaded as `run` loads it
+    /// (EuRoC rectified).
     #[arg(value_name = "IMAGE|DIR|KITTI-SEQUENCE")]
     pub input: PathBuf,
     /// The int8 model (`semloc convert`).
@@ -64,20 +66,58 @@ fn is_image(p: &Path) -> bool {
     matches!(ext.as_str(), "png" | "jpg" | "jpeg")
 }
 
+/// What `semloc segment` labels: image files, or the left camera of a dataset sequence
+/// (loaded as tracking loads it: EuRoC images rectified).
+enum Images {
+    Files(Vec<PathBuf>),
+    Sequence(Box<Sequence>),
+}
+
+impl Images {
+    fn open(input: &Path) -> Result<Self> {
+        if input.is_dir() {
+            if let Ok(seq) = Sequence::open(input, None) {
+                return Ok(Self::Sequence(Box::new(seq)));
+            }
+        }
+        list_images(input).map(Self::Files)
+    }
+
+    fn paths(&self) -> &[PathBuf] {
+        match self {
+            Self::Files(p) => p,
+            Self::Sequence(seq) => &seq.left,
+        }
+    }
+
+    fn load(&self, i: usize) -> Result<image::GrayImage> {
+        Ok(match self {
+            Self::Files(p) => load_luma_file(&p[i])?,
+            Self::Sequence(seq) => seq.load_luma_side(i, false)?,
+        })
+    }
+}
+
 /// Runs `semloc segment`.
 pub fn run(args: &SegmentArgs) -> Result<()> {
-    let mut images = list_images(&args.input)?;
-    if let Some(n) = args.limit {
-        images.truncate(n);
+    let images = Images::open(&args.input)?;
+    if let Images::Sequence(seq) = &images {
+        if seq.remap.is_some() {
+            eprintln!(
+                "note: {}: the left images are labelled rectified, as `run` tracks them",
+                seq.root.display()
+            );
+        }
     }
+    let n = args.limit.map_or(images.paths().len(), |n| n.min(images.paths().len()));
     let mut seg = Segmenter::new(SlmBlob::load(&args.model)?)?;
     let tract = args.onnx.as_deref().map(TractRef::load).transpose()?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let pb = super::progress(images.len() as u64, "segment");
+    let pb = super::progress(n as u64, "segment");
     let (mut ms, mut same, mut total) = (Vec::new(), 0u64, 0u64);
-    for path in &images {
-        let frame = load_luma_file(path)?;
+    for (i, path) in images.paths()[..n].iter().enumerate() {
+        let frame = images.load(i)?;
         let (w, h) = frame.dimensions();
         let t = Instant::now();
         let labels = seg.segment(&frame, Kernels::Fast)?;
@@ -103,8 +143,7 @@ pub fn run(args: &SegmentArgs) -> Result<()> {
     pb.finish_and_clear();
     let p = percentiles(&ms);
     println!(
-        "{} images -> {}: int8 (fast kernels, 1 thread) median {:.1} ms, p99 {:.1} ms per frame",
-        images.len(),
+        "{n} images -> {}: int8 (fast kernels, 1 thread) median {:.1} ms, p99 {:.1} ms per frame",
         args.out.display(),
         p.median_ms,
         p.p99_ms
