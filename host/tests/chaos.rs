@@ -12,14 +12,14 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::Instant;
 
+mod common;
+
+use common::{s, semloc, streams as text};
+
 const FRAMES: usize = 14;
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_semloc")
-}
-
-fn semloc(args: &[&str]) -> Output {
-    Command::new(bin()).args(args).output().expect("run semloc")
 }
 
 /// `semloc run` on the shared synthetic sequence into `out`, with `extra` arguments.
@@ -27,17 +27,6 @@ fn run_synth(out: &str, extra: &[&str]) -> Output {
     let mut args = vec!["run", s(synth_root()), "--seq", "00", "--out", out];
     args.extend_from_slice(extra);
     semloc(&args)
-}
-
-fn text(o: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// The shared synthetic sequence: `ROOT/sequences/00`, `ROOT/poses/00.txt`.

@@ -1,18 +1,10 @@
 //! The `semloc` binary end to end: exit codes, output and error messages naming the file.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
-fn semloc(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_semloc")).args(args).output().expect("run semloc")
-}
+mod common;
 
-fn text(o: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&o.stdout).into_owned(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
+use common::{semloc, streams as text};
 
 /// A straight 200 m drive (KITTI pose lines), optionally with a scale error on x/z.
 fn write_drive(path: &Path, n: usize, scale: f64) {

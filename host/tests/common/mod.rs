@@ -16,6 +16,14 @@ pub fn text(o: &Output) -> String {
     format!("{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
+/// stdout and stderr of `o`, separately (for assertions on one of them).
+pub fn streams(o: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
 /// `p` as UTF-8 (temporary paths are).
 pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
