@@ -185,3 +185,44 @@ fn a_missing_folder_is_refused_before_the_run() {
     assert!(text(&o).contains("--rerun") && text(&o).contains("does not exist"), "{}", text(&o));
     assert!(!dir.path().join("out").exists(), "the run started");
 }
+
+/// A run stopped by SIGINT still ends its recording: the file decodes to its end and holds
+/// exactly the frames `trajectory.txt` holds.
+#[test]
+fn an_interrupted_run_leaves_a_whole_recording_of_its_frames() {
+    use std::process::{Command, Stdio};
+    let data = common::synth("40", "static", "5");
+    let dir = tempfile::tempdir().unwrap();
+    let (out, rrd) = (dir.path().join("out"), dir.path().join("run.rrd"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_semloc"))
+        .args(["run", s(data.path()), "--seq", "00", "--out", s(&out), "--threads", "1"])
+        .args(["--rerun", s(&rrd)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lines =
+        || std::fs::read_to_string(out.join("trajectory.txt")).map_or(0, |t| t.lines().count());
+    let start = std::time::Instant::now();
+    while lines() < 3 {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before frame 3");
+        assert!(start.elapsed().as_secs() < 300, "no frame 3 after 300 s");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let pid = child.id().to_string();
+    assert!(Command::new("kill").args(["-2", &pid]).status().unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let frames = lines();
+    eprintln!("interrupted after {frames} of 40 frames");
+    assert!(frames >= 3, "{frames} frames");
+    if frames < 40 {
+        assert!(err.contains("stopped by SIGINT"), "{err}");
+    }
+    assert!(err.contains(&format!("rerun: {frames} frames recorded")), "{err}");
+    let chunks = read_chunks(&rrd);
+    let recorded = per_frame(&chunks, "/world/camera/image/features/tracking", |c| {
+        c.iter_component::<Position2D>().map(|row| row.len()).collect()
+    });
+    assert_eq!(recorded.len(), frames, "recorded frames vs trajectory.txt");
+}
