@@ -207,7 +207,7 @@ fn an_interrupted_run_leaves_a_whole_recording_of_its_frames() {
     while lines() < 3 {
         assert!(child.try_wait().unwrap().is_none(), "the run ended before frame 3");
         assert!(start.elapsed().as_secs() < 300, "no frame 3 after 300 s");
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::thread::sleep(core::time::Duration::from_millis(20));
     }
     let pid = child.id().to_string();
     assert!(Command::new("kill").args(["-2", &pid]).status().unwrap().success());
