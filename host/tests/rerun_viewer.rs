@@ -226,3 +226,77 @@ fn an_interrupted_run_leaves_a_whole_recording_of_its_frames() {
     });
     assert_eq!(recorded.len(), frames, "recorded frames vs trajectory.txt");
 }
+
+/// The `rerun` command-line tool (`pip install rerun-sdk`): `SEMLOC_RERUN`, else `rerun` beside
+/// `SEMLOC_PYTHON` (CI's oracle venv), else `rerun` on the PATH.
+fn rerun_cli() -> std::path::PathBuf {
+    if let Some(p) = std::env::var_os("SEMLOC_RERUN") {
+        return p.into();
+    }
+    std::env::var_os("SEMLOC_PYTHON")
+        .map(std::path::PathBuf::from)
+        .and_then(|py| py.parent().map(|d| d.join("rerun")))
+        .filter(|p| p.is_file())
+        .unwrap_or_else(|| "rerun".into())
+}
+
+/// A recording of real KITTI frames (with the committed network's segmentation) is loaded and
+/// interpreted without error by rerun's own `rerun rrd verify`, the viewer's loader.
+#[test]
+#[ignore = "real data in ../shared/data and the rerun CLI; run with --ignored (CI does)"]
+fn a_kitti_recording_verifies_with_the_rerun_tool() {
+    use std::process::Command;
+    let required = std::env::var_os("SEMLOC_REQUIRE_DATA").is_some();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/kitti-odometry");
+    if !root.is_dir() {
+        assert!(!required, "SEMLOC_REQUIRE_DATA is set but {} does not exist", root.display());
+        eprintln!("skipping: {} not found", root.display());
+        return;
+    }
+    let cli = rerun_cli();
+    let version = match Command::new(&cli).arg("--version").output() {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+        other => {
+            assert!(
+                !required,
+                "SEMLOC_REQUIRE_DATA is set but {} does not run: {other:?}",
+                cli.display()
+            );
+            eprintln!("skipping: no rerun CLI ({})", cli.display());
+            return;
+        }
+    };
+    assert!(version.contains(" 0.23."), "the rerun CLI is {version}; the recording is 0.23");
+    let model =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/artefacts/fastscnn_r2_192x640.slm");
+    let dir = tempfile::tempdir().unwrap();
+    let rrd = dir.path().join("kitti.rrd");
+    let o = semloc(&[
+        "run",
+        s(&root),
+        "--seq",
+        "06",
+        "--max-frames",
+        "8",
+        "--semantics",
+        "motion",
+        "--model",
+        s(&model),
+        "--out",
+        s(&dir.path().join("out")),
+        "--rerun",
+        s(&rrd),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v = Command::new(&cli).args(["rrd", "verify"]).arg(&rrd).output().unwrap();
+    let said =
+        format!("{}{}", String::from_utf8_lossy(&v.stdout), String::from_utf8_lossy(&v.stderr));
+    assert!(
+        v.status.success() && said.contains("verified without error"),
+        "rerun rrd verify: {said}"
+    );
+    let entities = per_frame(&read_chunks(&rrd), "/world/camera/image/segmentation", |c| {
+        c.iter_component::<rerun::components::ImageBuffer>().map(|row| row.len()).collect()
+    });
+    assert_eq!(entities.len(), 8, "segmentations of the 8 frames");
+}
