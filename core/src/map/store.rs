@@ -110,6 +110,17 @@ impl Landmark {
         moving_lo: 0.0,
     };
 
+    /// The most frequent class of its keyframe observations (ties: the lowest id); `None`
+    /// without class evidence (no labels).
+    pub fn class(&self) -> Option<u8> {
+        let best =
+            self.class_hist.iter().enumerate().max_by_key(|&(i, &n)| (n, core::cmp::Reverse(i)));
+        match best {
+            Some((i, &n)) if n > 0 => Some(i as u8),
+            _ => None,
+        }
+    }
+
     /// The observations.
     pub fn observations(&self) -> &[Obs] {
         &self.obs[..usize::from(self.n_obs)]

@@ -19,7 +19,6 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use semloc_core::map::Map;
-use semloc_core::seg::NUM_CLASSES;
 
 use crate::nn::segment::CAMVID_PALETTE;
 
@@ -64,12 +63,7 @@ impl MapCollector {
             if !lm.alive {
                 continue;
             }
-            let hist = &lm.class_hist[..NUM_CLASSES];
-            let best = hist.iter().enumerate().max_by_key(|&(i, &n)| (n, core::cmp::Reverse(i)));
-            let class = match best {
-                Some((i, &n)) if n > 0 => i as u8,
-                _ => NO_CLASS,
-            };
+            let class = lm.class().unwrap_or(NO_CLASS);
             let p = [lm.p_w.x, lm.p_w.y, lm.p_w.z];
             self.points
                 .entry((id as u32, lm.created_kf))

@@ -681,7 +681,6 @@ pub fn run_observed(
         None => None,
     };
     let mut stream = stream::StreamWriter::create(&out, seq.time_origin_s)?;
-    let mut done = 0usize;
     let Tracked { frames, failure } =
         track_frames(&mut pipe, seq, n, stop.as_ref(), &mut |p: &Pipeline, r: &FrameRecord| {
             stream.append(r)?;
@@ -690,10 +689,8 @@ pub fn run_observed(
             }
             #[cfg(feature = "rerun")]
             if let Some(v) = viewer.as_mut() {
-                let left = seq.left(done)?;
-                v.record(p, &left, r)?;
+                v.record(p, r)?;
             }
-            done += 1;
             on_frame(r);
             Ok(())
         });

@@ -34,7 +34,7 @@ use rerun::sink::MemorySinkStorage;
 use rerun::RecordingStream;
 use semloc_core::frame::FRAME_CAPACITY;
 use semloc_core::geom::Se3;
-use semloc_core::seg::{CLASS_NAMES, NUM_CLASSES, VOID};
+use semloc_core::seg::{CLASS_NAMES, VOID};
 use semloc_core::tracker::FeatureUse;
 
 use crate::dataset::StereoCalib;
@@ -147,27 +147,17 @@ impl Recorder {
         Ok(())
     }
 
-    /// Records frame `r`: the pipeline holds its features, labels, matches and map;
-    /// `left` is its left image.
+    /// Records frame `r`: the pipeline holds its left image (the extractor's pyramid level 0,
+    /// an exact copy), features, labels, matches and map.
     ///
     /// # Errors
     /// [`RunError::Write`] naming the file.
-    pub fn record(
-        &mut self,
-        pipe: &Pipeline,
-        left: &image::GrayImage,
-        r: &FrameRecord,
-    ) -> Result<(), RunError> {
-        self.log_frame(pipe, left, r).map_err(|e| write_err(&self.path, e))?;
+    pub fn record(&mut self, pipe: &Pipeline, r: &FrameRecord) -> Result<(), RunError> {
+        self.log_frame(pipe, r).map_err(|e| write_err(&self.path, e))?;
         self.drain()
     }
 
-    fn log_frame(
-        &mut self,
-        pipe: &Pipeline,
-        left: &image::GrayImage,
-        r: &FrameRecord,
-    ) -> Result<(), BoxError> {
+    fn log_frame(&mut self, pipe: &Pipeline, r: &FrameRecord) -> Result<(), BoxError> {
         let rep = &r.output.report;
         let rec = &self.rec;
         let t0 = *self.first_time_s.get_or_insert(r.timestamp_s);
@@ -184,15 +174,22 @@ impl Recorder {
                 rerun::Quaternion::from_xyzw(q),
             ),
         )?;
-        // JPEG (quality 90): a KITTI frame takes ~70 KB instead of 467 KB raw.
+        let loc = pipe.localiser();
+        // The left image as the extractor holds it (no second decode from disk), as JPEG
+        // (quality 90): a KITTI frame takes ~70 KB instead of 467 KB raw.
+        let left = loc.left_extractor().pyramid().level(0);
+        let pixels: Vec<u8> = (0..left.height()).flat_map(|y| left.row(y)).copied().collect();
         let mut jpeg = Vec::new();
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY)
-            .encode_image(left)?;
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY).encode(
+            &pixels,
+            left.width() as u32,
+            left.height() as u32,
+            image::ExtendedColorType::L8,
+        )?;
         rec.log(
             "world/camera/image",
             &rerun::EncodedImage::from_file_contents(jpeg).with_media_type(rerun::MediaType::JPEG),
         )?;
-        let loc = pipe.localiser();
         if let Some(labels) = loc.labels() {
             let format = rerun::datatypes::ImageFormat::segmentation(
                 [self.width, self.height],
@@ -247,12 +244,7 @@ impl Recorder {
             if !p.iter().all(|v| v.is_finite()) {
                 continue;
             }
-            let hist = &lm.class_hist[..NUM_CLASSES];
-            let best = hist.iter().enumerate().max_by_key(|&(i, &n)| (n, core::cmp::Reverse(i)));
-            pcls.push(match best {
-                Some((i, &c)) if c > 0 => i as u16,
-                _ => u16::from(VOID),
-            });
+            pcls.push(u16::from(lm.class().unwrap_or(VOID)));
             pts.push(p);
         }
         let n_map = pts.len();

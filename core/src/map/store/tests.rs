@@ -187,3 +187,14 @@ fn best_covisible_orders_by_shared_landmarks() {
         assert_eq!(m.best_covisible(a, 5, 1, stamp, &mut out), 0);
     });
 }
+
+#[test]
+fn landmark_class_is_the_most_frequent_with_ties_to_the_lowest_id() {
+    let mut l = Landmark::EMPTY;
+    assert_eq!(l.class(), None);
+    l.class_hist[8] = 2;
+    l.class_hist[3] = 1;
+    assert_eq!(l.class(), Some(8));
+    l.class_hist[4] = 2;
+    assert_eq!(l.class(), Some(4));
+}
