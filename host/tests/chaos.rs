@@ -32,23 +32,7 @@ fn run_synth(out: &str, extra: &[&str]) -> Output {
 /// The shared synthetic sequence: `ROOT/sequences/00`, `ROOT/poses/00.txt`.
 fn synth_root() -> &'static Path {
     static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    ROOT.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let o = semloc(&[
-            "synth",
-            "--out",
-            s(dir.path()),
-            "--frames",
-            &FRAMES.to_string(),
-            "--dynamics",
-            "static",
-            "--seed",
-            "3",
-        ]);
-        assert!(o.status.success(), "synth: {:?}", text(&o));
-        dir
-    })
-    .path()
+    ROOT.get_or_init(|| common::synth(&FRAMES.to_string(), "static", "3")).path()
 }
 
 /// A copy of the shared sequence under `dir` (images linked, text files copied) whose frame
