@@ -13,9 +13,12 @@
 //! 2. **Segment.** After the pose solve the frame's dynamic-class features are grouped into
 //!    segments, one per object: single linkage between features of the same category (vehicle
 //!    or human) closer than [`MotionParams::link_px`] in the image and, when both have stereo
-//!    depth, less than [`MotionParams::link_m`] apart in 3D (without stereo: half the pixel
-//!    distance). Connected label regions would join a row of parked cars, and the car driving
-//!    past them, into one region; a metric gap keeps them apart.
+//!    depth, less than [`MotionParams::link_m`] apart in 3D. Connected label regions would
+//!    join a row of parked cars, and the car driving past them, into one region; a metric gap
+//!    keeps them apart. A feature without depth joins its nearest stereo neighbour (within
+//!    half the pixel distance) and never links two segments: chained through such features,
+//!    the passing car and the parked one were one object again (on synthetic `high` a third
+//!    of the wrongly removed features were parked cars joined to moving ones that way).
 //! 3. **Test against the ego-motion.** Every matched feature of a segment is a measurement of
 //!    its landmark at the solved pose: χ² at most the 95 % gate (as ORB-SLAM2's) is evidence
 //!    for "static", above it for "moving". Per feature the log-likelihood ratio
@@ -209,6 +212,13 @@ impl MotionScratch {
 
     /// Groups the dynamic-class features of `feats` into segments (see the module
     /// documentation); afterwards [`Self::root`] names each feature's segment.
+    ///
+    /// Stereo features link to each other by image and metric distance. A feature without
+    /// depth joins the segment of its nearest stereo neighbour (same category, within half of
+    /// [`MotionParams::link_px`]) and never links two segments: in traffic a monocular feature
+    /// on the border between a car driving past and the parked car behind it would otherwise
+    /// chain the two into one object. Features without depth and without a stereo neighbour
+    /// link among themselves.
     pub fn segment(&mut self, feats: &[Feature], cam: &StereoCamera, params: &MotionParams) -> u32 {
         let (fx, fy) = (cam.fx_px as f32, cam.fy_px as f32);
         self.dyn_idx.clear();
@@ -219,39 +229,106 @@ impl MotionScratch {
             }
         }
         let n = self.dyn_idx.len();
+        let near = |fa: &Feature, fb: &Feature, px: f32| {
+            (fa.x - fb.x).abs() <= px
+                && (fa.y - fb.y).abs() <= px
+                && category(fa.class) == category(fb.class)
+        };
+        // Stereo with stereo.
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
             let fa = feats[ia];
+            if !fa.is_stereo() {
+                continue;
+            }
             for b in a + 1..n {
                 let ib = usize::from(self.dyn_idx[b]);
                 let fb = feats[ib];
-                if (fa.x - fb.x).abs() > params.link_px
-                    || (fa.y - fb.y).abs() > params.link_px
-                    || category(fa.class) != category(fb.class)
-                {
+                if !fb.is_stereo() || !near(&fa, &fb, params.link_px) {
                     continue;
                 }
-                if fa.is_stereo() && fb.is_stereo() {
-                    // Metric gap at the pair's depth; the depth difference counts beyond
-                    // 5 % of the depth (stereo noise).
-                    let z = 0.5 * (fa.depth_m + fb.depth_m);
-                    let dx = (fa.x - fb.x) * z / fx;
-                    let dy = (fa.y - fb.y) * z / fy;
-                    let dz = ((fa.depth_m - fb.depth_m).abs() - 0.05 * z).max(0.0);
-                    if dx * dx + dy * dy + dz * dz > params.link_m * params.link_m {
-                        continue;
-                    }
-                } else if (fa.x - fb.x).abs() > 0.5 * params.link_px
-                    || (fa.y - fb.y).abs() > 0.5 * params.link_px
-                {
+                // Metric gap at the pair's depth; the depth difference counts beyond 5 % of the
+                // depth (stereo noise).
+                let z = 0.5 * (fa.depth_m + fb.depth_m);
+                let dx = (fa.x - fb.x) * z / fx;
+                let dy = (fa.y - fb.y) * z / fy;
+                let dz = ((fa.depth_m - fb.depth_m).abs() - 0.05 * z).max(0.0);
+                if dx * dx + dy * dy + dz * dz <= params.link_m * params.link_m {
+                    self.union(ia, ib);
+                }
+            }
+        }
+        // A monocular feature joins its nearest stereo neighbour (ties: the lower index); the
+        // unattached ones are marked in `n_lm` for the last pass.
+        let half = 0.5 * params.link_px;
+        for a in 0..n {
+            let ia = usize::from(self.dyn_idx[a]);
+            let fa = feats[ia];
+            self.n_lm[ia] = 0;
+            if fa.is_stereo() {
+                continue;
+            }
+            let mut best: Option<(f32, usize)> = None;
+            for b in 0..n {
+                let ib = usize::from(self.dyn_idx[b]);
+                let fb = feats[ib];
+                if !fb.is_stereo() || !near(&fa, &fb, half) {
                     continue;
                 }
-                let (ra, rb) = (self.find(ia), self.find(ib));
-                if ra != rb {
-                    // The smaller index is the root: deterministic whatever the link order.
-                    let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
-                    self.parent[hi] = lo as u16;
+                let d = (fa.x - fb.x) * (fa.x - fb.x) + (fa.y - fb.y) * (fa.y - fb.y);
+                if best.is_none_or(|(bd, _)| d < bd) {
+                    best = Some((d, ib));
                 }
+            }
+            match best {
+                Some((_, ib)) => self.union(ia, ib),
+                None => self.n_lm[ia] = 1,
+            }
+        }
+        // Unattached monocular features with each other.
+        for a in 0..n {
+            let ia = usize::from(self.dyn_idx[a]);
+            if self.n_lm[ia] == 0 {
+                continue;
+            }
+            for b in a + 1..n {
+                let ib = usize::from(self.dyn_idx[b]);
+                if self.n_lm[ib] != 0 && near(&feats[ia], &feats[ib], half) {
+                    self.union(ia, ib);
+                }
+            }
+        }
+        // Each such group joins the one segment nearest to any of its features (through a
+        // monocular feature attached in the second pass), never two.
+        for a in 0..n {
+            let ia = usize::from(self.dyn_idx[a]);
+            self.lo_sum[ia] = f32::INFINITY;
+            self.n_ok[ia] = ia as u16;
+        }
+        for a in 0..n {
+            let ia = usize::from(self.dyn_idx[a]);
+            if self.n_lm[ia] == 0 {
+                continue;
+            }
+            let r = self.find(ia);
+            for b in 0..n {
+                let ib = usize::from(self.dyn_idx[b]);
+                let (fa, fb) = (feats[ia], feats[ib]);
+                if self.n_lm[ib] != 0 || !near(&fa, &fb, half) {
+                    continue;
+                }
+                let d = (fa.x - fb.x) * (fa.x - fb.x) + (fa.y - fb.y) * (fa.y - fb.y);
+                if d < self.lo_sum[r] {
+                    self.lo_sum[r] = d;
+                    self.n_ok[r] = ib as u16;
+                }
+            }
+        }
+        for a in 0..n {
+            let ia = usize::from(self.dyn_idx[a]);
+            if self.n_lm[ia] != 0 && self.find(ia) == ia && self.lo_sum[ia].is_finite() {
+                let target = usize::from(self.n_ok[ia]);
+                self.union(ia, target);
             }
         }
         let mut segments = 0;
@@ -262,6 +339,16 @@ impl MotionScratch {
             }
         }
         segments
+    }
+
+    /// Joins the segments of `a` and `b`; the smaller root index stays the root
+    /// (deterministic whatever the link order).
+    fn union(&mut self, a: usize, b: usize) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+            self.parent[hi] = lo as u16;
+        }
     }
 
     /// Whether feature `i` has a match measured at the solved pose.
@@ -408,6 +495,35 @@ mod tests {
         assert_eq!(s.root(3), 3);
         assert_eq!(s.root(4), 4);
         assert_eq!(s.root(5), 5);
+    }
+
+    /// A feature without depth between a passing car and a parked one joins the nearer and
+    /// does not chain the two; depthless groups join one segment through their nearest
+    /// attached feature.
+    #[test]
+    fn depthless_features_do_not_bridge_objects() {
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        let p = MotionParams::default();
+        let feats = [
+            feat(100.0, 100.0, 8.0, 8),  // passing car
+            feat(120.0, 100.0, 8.1, 8),  // passing car
+            feat(150.0, 100.0, 12.0, 8), // parked car, 4 m behind
+            feat(170.0, 100.0, 12.1, 8), // parked car
+            feat(136.0, 100.0, 0.0, 8),  // no depth: 16 px from the first, 14 px from the second
+            feat(185.0, 100.0, 0.0, 8),  // no depth, next to the parked car
+            feat(200.0, 100.0, 0.0, 8),  // no depth, 30 px from any stereo feature
+            feat(215.0, 100.0, 0.0, 8),  // no depth, chained to the one before
+            feat(400.0, 100.0, 0.0, 8),  // no depth, alone
+        ];
+        s.reset(feats.len());
+        assert_eq!(s.segment(&feats, &crate::testing::kitti_cam(), &p), 3);
+        assert_eq!(s.root(1), 0);
+        assert_eq!(s.root(3), 2);
+        assert_eq!(s.root(4), 2, "joins the nearer (parked) car only");
+        assert_eq!(s.root(5), 2);
+        assert_eq!(s.root(6), 2, "a depthless group joins through its nearest attached feature");
+        assert_eq!(s.root(7), 2);
+        assert_eq!(s.root(8), 8);
     }
 
     /// A parked car (consistent matches) is used, a moving one (inconsistent) removed, and a

@@ -12,7 +12,7 @@
 //!   semantics, hard association), issue 6's targets: high traffic ≤ 0.5 × the backbone's ATE,
 //!   static traffic no worse than the backbone by more than 5 %.
 //! - motion-aware semantics + EM (issue 15, measured 2026-11-24, seed 1, 80 frames): in a
-//!   street lined with parked cars (`parked`: 0.078 m) it beats Table-1 culling with the same
+//!   street lined with parked cars (`parked`: 0.077 m) it beats Table-1 culling with the same
 //!   association (0.112 m), because the parked cars stay usable; in high traffic it stays
 //!   ≤ 0.5 × the backbone (0.105 m vs 24.1 m) and the features it removes cover the moving
 //!   objects (precision 0.83, recall 0.985 against the generator's `dynamic/` mask).
@@ -140,6 +140,8 @@ fn motion_aware_semantics_find_the_moving_traffic() {
          moving features: precision {p:.3}, recall {r:.3}"
     );
     assert!(motion <= 0.5 * backbone, "motion + EM {motion:.3} m vs backbone {backbone:.3} m");
-    assert!(p >= 0.75 && r >= 0.95, "moving-feature precision {p:.3}, recall {r:.3}");
+    // 0.833 / 0.980 measured; 0.815 / 0.977 before depthless features stopped chaining the
+    // passing cars into the parked ones (motion.rs, `segment`).
+    assert!(p >= 0.82 && r >= 0.97, "moving-feature precision {p:.3}, recall {r:.3}");
     assert_eq!(lost, 0);
 }
