@@ -39,7 +39,7 @@
 //!
 //! The EM association sees the outcome through its candidates: held features have none.
 //!
-//! Memory: [`MotionScratch`] is ≈ 40 KiB of per-frame arrays; the per-landmark log-odds live
+//! Memory: [`MotionScratch`] is ≈ 54 KiB of per-frame arrays; the per-landmark log-odds live
 //! in [`crate::map::Landmark::moving_lo`]. No allocation, deterministic.
 
 use heapless::Vec;
@@ -171,6 +171,12 @@ pub(crate) struct MotionScratch {
     n_bad: [u16; FRAME_CAPACITY],
     lo_sum: [f32; FRAME_CAPACITY],
     n_lm: [u16; FRAME_CAPACITY],
+    /// Grouping: a depthless feature with no stereo neighbour.
+    unattached: [bool; FRAME_CAPACITY],
+    /// Grouping, per depthless group root: squared pixel distance to, and index of, the
+    /// nearest attached feature.
+    join_d2: [f32; FRAME_CAPACITY],
+    join_to: [u16; FRAME_CAPACITY],
 }
 
 impl MotionScratch {
@@ -189,6 +195,9 @@ impl MotionScratch {
             n_bad: [0; FRAME_CAPACITY],
             lo_sum: [0.0; FRAME_CAPACITY],
             n_lm: [0; FRAME_CAPACITY],
+            unattached: [false; FRAME_CAPACITY],
+            join_d2: [f32::INFINITY; FRAME_CAPACITY],
+            join_to: [0; FRAME_CAPACITY],
         }
     }
 
@@ -259,12 +268,12 @@ impl MotionScratch {
             }
         }
         // A monocular feature joins its nearest stereo neighbour (ties: the lower index); the
-        // unattached ones are marked in `n_lm` for the last pass.
+        // unattached ones are marked for the last passes.
         let half = 0.5 * params.link_px;
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
             let fa = feats[ia];
-            self.n_lm[ia] = 0;
+            self.unattached[ia] = false;
             if fa.is_stereo() {
                 continue;
             }
@@ -282,18 +291,18 @@ impl MotionScratch {
             }
             match best {
                 Some((_, ib)) => self.union(ia, ib),
-                None => self.n_lm[ia] = 1,
+                None => self.unattached[ia] = true,
             }
         }
         // Unattached monocular features with each other.
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
-            if self.n_lm[ia] == 0 {
+            if !self.unattached[ia] {
                 continue;
             }
             for b in a + 1..n {
                 let ib = usize::from(self.dyn_idx[b]);
-                if self.n_lm[ib] != 0 && near(&feats[ia], &feats[ib], half) {
+                if self.unattached[ib] && near(&feats[ia], &feats[ib], half) {
                     self.union(ia, ib);
                 }
             }
@@ -302,32 +311,31 @@ impl MotionScratch {
         // monocular feature attached in the second pass), never two.
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
-            self.lo_sum[ia] = f32::INFINITY;
-            self.n_ok[ia] = ia as u16;
+            self.join_d2[ia] = f32::INFINITY;
         }
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
-            if self.n_lm[ia] == 0 {
+            if !self.unattached[ia] {
                 continue;
             }
             let r = self.find(ia);
             for b in 0..n {
                 let ib = usize::from(self.dyn_idx[b]);
                 let (fa, fb) = (feats[ia], feats[ib]);
-                if self.n_lm[ib] != 0 || !near(&fa, &fb, half) {
+                if self.unattached[ib] || !near(&fa, &fb, half) {
                     continue;
                 }
                 let d = (fa.x - fb.x) * (fa.x - fb.x) + (fa.y - fb.y) * (fa.y - fb.y);
-                if d < self.lo_sum[r] {
-                    self.lo_sum[r] = d;
-                    self.n_ok[r] = ib as u16;
+                if d < self.join_d2[r] {
+                    self.join_d2[r] = d;
+                    self.join_to[r] = ib as u16;
                 }
             }
         }
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
-            if self.n_lm[ia] != 0 && self.find(ia) == ia && self.lo_sum[ia].is_finite() {
-                let target = usize::from(self.n_ok[ia]);
+            if self.unattached[ia] && self.find(ia) == ia && self.join_d2[ia].is_finite() {
+                let target = usize::from(self.join_to[ia]);
                 self.union(ia, target);
             }
         }
