@@ -4,7 +4,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{parked_root, s, semloc, text};
+use common::{run_parked, s, text};
 
 /// A parsed PLY vertex: x, y, z (m), class, observations.
 struct Vertex {
@@ -44,18 +44,7 @@ fn read_ply(path: &Path) -> Vec<Vertex> {
 }
 
 fn run(semantics: &str, out: &Path, map: &Path) {
-    let o = semloc(&[
-        "run",
-        s(parked_root()),
-        "--seq",
-        "00",
-        "--out",
-        s(out),
-        "--semantics",
-        semantics,
-        "--export-map",
-        s(map),
-    ]);
+    let o = run_parked(out, &["--semantics", semantics, "--export-map", s(map)]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("confirmed points"), "{}", text(&o));
 }
@@ -100,16 +89,7 @@ fn without_labels_points_have_no_class() {
 fn a_missing_folder_is_refused_before_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = semloc(&[
-        "run",
-        s(parked_root()),
-        "--seq",
-        "00",
-        "--out",
-        s(&out),
-        "--export-map",
-        s(&dir.path().join("nowhere/map.ply")),
-    ]);
+    let o = run_parked(&out, &["--export-map", s(&dir.path().join("nowhere/map.ply"))]);
     assert!(!o.status.success());
     assert!(text(&o).contains("nowhere") && text(&o).contains("does not exist"), "{}", text(&o));
     assert!(!out.exists(), "nothing is written when the map cannot be");

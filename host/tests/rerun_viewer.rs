@@ -7,7 +7,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use common::{parked_root, s, semloc, text};
+use common::{run_parked, s, semloc, text};
 use rerun::components::{ClassId, Color, Position2D, Position3D};
 use rerun::log::{Chunk, LogMsg};
 
@@ -70,18 +70,7 @@ fn csv_column(out: &Path, name: &str) -> Vec<u32> {
 fn run_records_images_features_map_and_paths() {
     let dir = tempfile::tempdir().unwrap();
     let (out, rrd) = (dir.path().join("out"), dir.path().join("run.rrd"));
-    let o = semloc(&[
-        "run",
-        s(parked_root()),
-        "--seq",
-        "00",
-        "--out",
-        s(&out),
-        "--semantics",
-        "motion",
-        "--rerun",
-        s(&rrd),
-    ]);
+    let o = run_parked(&out, &["--semantics", "motion", "--rerun", s(&rrd)]);
     assert!(o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("10 frames recorded to"), "{}", text(&o));
     let chunks = read_chunks(&rrd);
@@ -171,16 +160,7 @@ fn run_records_images_features_map_and_paths() {
 fn a_missing_folder_is_refused_before_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let rrd = dir.path().join("nope").join("run.rrd");
-    let o = semloc(&[
-        "run",
-        s(parked_root()),
-        "--seq",
-        "00",
-        "--out",
-        s(&dir.path().join("out")),
-        "--rerun",
-        s(&rrd),
-    ]);
+    let o = run_parked(&dir.path().join("out"), &["--rerun", s(&rrd)]);
     assert!(!o.status.success());
     assert!(text(&o).contains("--rerun") && text(&o).contains("does not exist"), "{}", text(&o));
     assert!(!dir.path().join("out").exists(), "the run started");

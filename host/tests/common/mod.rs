@@ -54,3 +54,10 @@ pub fn parked_root() -> &'static Path {
     static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
     ROOT.get_or_init(|| synth("10", "parked", "11")).path()
 }
+
+/// `semloc run` on [`parked_root`]'s sequence 00 into `out`, with `extra` arguments.
+pub fn run_parked(out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["run", s(parked_root()), "--seq", "00", "--out", s(out)];
+    args.extend_from_slice(extra);
+    semloc(&args)
+}
