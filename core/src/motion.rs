@@ -25,8 +25,21 @@
 //!    `ln p(·|moving)/p(·|static)` is `ln(0.25/0.85)` for a consistent and `ln(0.75/0.15)` for
 //!    an inconsistent measurement (a segment is called moving above ~43 % inconsistent); the
 //!    segment sums them (clamped to ±[`MotionParams::max_frame_llr`]).
+//!    **Frame to frame.** A moving object makes no landmarks, and an object seen for the
+//!    first time has none yet, so most of their features had nothing to be measured against
+//!    and stayed unproven. Each dynamic-class feature without a landmark match is therefore
+//!    matched to the previous frame's dynamic-class stereo features (same category, ORB
+//!    distance ≤ [`TRACK_MAX_HAMMING`] with a ratio test, within [`MotionParams::track_px`] of
+//!    where the previous feature appears if its object stood still) and measured the same
+//!    way against the 3D point where its chain of such matches began, with that point's
+//!    stereo noise added. Measuring against the chain's start, not the last frame, lets a car
+//!    creeping ahead along the line of sight add up its motion as it would against a landmark.
 //! 4. **A latent "moving" variable per landmark**, accumulated over frames: each matched
 //!    landmark of the segment adds the segment's evidence to its log-odds (clamped to ±4). The
+//!    A feature matched frame to frame carries the log-odds of the feature it matched the
+//!    same way, and a landmark a keyframe creates from a feature starts with the feature's
+//!    log-odds. Only measured features carry log-odds on: an unmeasured feature may belong to
+//!    another object that its segment wrongly joined. The
 //!    segment's posterior is the class prior ([`MotionParams::prior_vehicle`],
 //!    [`MotionParams::prior_human`]: cars in a city are mostly parked) plus the mean log-odds of
 //!    its landmarks after the update.
@@ -43,9 +56,12 @@
 //! in [`crate::map::Landmark::moving_lo`]. No allocation, deterministic.
 
 use heapless::Vec;
+use nalgebra::Vector3;
 
-use crate::frame::{Feature, FRAME_CAPACITY};
-use crate::geom::StereoCamera;
+use crate::frame::{hamming, level_inv_sigma2, level_scale, Descriptor, Feature, FRAME_CAPACITY};
+use crate::geom::{Se3, StereoCamera};
+use crate::map::{measurement, NO_LANDMARK};
+use crate::optim::chi2;
 use crate::seg::{category, is_dynamic, Category};
 
 /// Settings of the motion test.
@@ -66,6 +82,10 @@ pub struct MotionParams {
     pub min_evidence: u32,
     /// Largest evidence (nats) one frame adds to a segment either way.
     pub max_frame_llr: f32,
+    /// Search radius (px at level 0, scaled by the level) of the frame-to-frame test around
+    /// where a previous-frame feature of a dynamic class would appear if its object stood
+    /// still; 0 turns the frame-to-frame test off (only landmarks are tested).
+    pub track_px: f32,
 }
 
 impl Default for MotionParams {
@@ -77,6 +97,7 @@ impl Default for MotionParams {
             link_m: 1.0,
             min_evidence: 3,
             max_frame_llr: 1.0,
+            track_px: 48.0,
         }
     }
 }
@@ -149,10 +170,41 @@ pub struct MotionReport {
     pub unproven_features: u32,
 }
 
-/// Per-frame arrays of the motion test.
+/// Most dynamic-class features of the previous frame the frame-to-frame test remembers.
+pub const PREV_CAPACITY: usize = 1024;
+
+/// A dynamic-class stereo feature of the previous frame: where it was in the world if its
+/// object stood still, where its chain of frame-to-frame matches started, what it looked
+/// like, and its object's moving log-odds.
+#[derive(Clone, Copy, Debug)]
+struct PrevFeature {
+    /// Its stereo point at the previous frame's pose: where the search looks.
+    p_w: Vector3<f64>,
+    /// The stereo point of the chain's first frame: what the test measures against, so that
+    /// an object creeping along the line of sight (a car ahead in the same lane) accumulates
+    /// its motion over frames, as it would against a landmark.
+    anchor_w: Vector3<f64>,
+    /// Depth (m) and level of the chain's first observation (its noise).
+    anchor_depth: f32,
+    anchor_level: u8,
+    desc: Descriptor,
+    level: u8,
+    class: u8,
+    lo: f32,
+}
+
+/// Largest ORB distance of a frame-to-frame match (ORB-SLAM2's `TH_LOW`): without a landmark's
+/// history a match rests on one descriptor, and on a car's repeated texture a loose match
+/// would read as motion.
+pub const TRACK_MAX_HAMMING: u32 = 50;
+
+/// No current feature has claimed a previous one.
+const NO_CLAIM: u16 = u16::MAX;
+
+/// Per-frame arrays of the motion test, and the previous frame's dynamic-class features.
 pub(crate) struct MotionScratch {
     /// Landmark each dynamic-class (or held) feature matched before the association
-    /// ([`crate::map::NO_LANDMARK`] if none).
+    /// ([`NO_LANDMARK`] if none).
     pub cand: [u32; FRAME_CAPACITY],
     /// χ² of that match at the solved pose (negative: none or behind the camera).
     pub chi2: [f32; FRAME_CAPACITY],
@@ -177,12 +229,30 @@ pub(crate) struct MotionScratch {
     /// nearest attached feature.
     join_d2: [f32; FRAME_CAPACITY],
     join_to: [u16; FRAME_CAPACITY],
+    /// Frame to frame: the moving log-odds of the previous-frame feature this feature matched
+    /// (NaN if none; only for features without a landmark match).
+    prev_lo: [f32; FRAME_CAPACITY],
+    /// The feature's moving log-odds after this frame (its object's, without the class
+    /// prior): carried to the next frame and into the landmark it creates.
+    pub lo_out: [f32; FRAME_CAPACITY],
+    /// The previous frame's dynamic-class stereo features (world points at its pose).
+    prev: Vec<PrevFeature, PREV_CAPACITY>,
+    /// This frame's, built by [`Self::remember`] and then swapped with `prev`.
+    next: Vec<PrevFeature, PREV_CAPACITY>,
+    /// Per feature: the previous feature it matched ([`NO_CLAIM`]: none).
+    prev_of: [u16; FRAME_CAPACITY],
+    /// Per previous feature: the current feature that claims it, and their ORB distance.
+    prev_claim: [u16; PREV_CAPACITY],
+    prev_dist: [u16; PREV_CAPACITY],
+    /// Per previous feature: its projection at the current pose (u, v; v < 0 off-image or
+    /// behind the camera).
+    prev_uv: [[f32; 2]; PREV_CAPACITY],
 }
 
 impl MotionScratch {
     pub const fn new() -> Self {
         Self {
-            cand: [crate::map::NO_LANDMARK; FRAME_CAPACITY],
+            cand: [NO_LANDMARK; FRAME_CAPACITY],
             chi2: [-1.0; FRAME_CAPACITY],
             gate: [0.0; FRAME_CAPACITY],
             held: [false; FRAME_CAPACITY],
@@ -198,16 +268,161 @@ impl MotionScratch {
             unattached: [false; FRAME_CAPACITY],
             join_d2: [f32::INFINITY; FRAME_CAPACITY],
             join_to: [0; FRAME_CAPACITY],
+            prev_lo: [f32::NAN; FRAME_CAPACITY],
+            lo_out: [0.0; FRAME_CAPACITY],
+            prev: Vec::new(),
+            next: Vec::new(),
+            prev_of: [NO_CLAIM; FRAME_CAPACITY],
+            prev_claim: [NO_CLAIM; PREV_CAPACITY],
+            prev_dist: [0; PREV_CAPACITY],
+            prev_uv: [[0.0; 2]; PREV_CAPACITY],
         }
     }
 
     /// Resets the per-frame arrays for a frame of `n` features (all static, nothing held).
     pub fn reset(&mut self, n: usize) {
-        self.cand[..n].fill(crate::map::NO_LANDMARK);
+        self.cand[..n].fill(NO_LANDMARK);
         self.chi2[..n].fill(-1.0);
         self.held[..n].fill(false);
         self.state[..n].fill(FeatureMotion::Static);
         self.blocked[..n].fill(false);
+        self.prev_lo[..n].fill(f32::NAN);
+        self.prev_of[..n].fill(NO_CLAIM);
+        self.lo_out[..n].fill(0.0);
+    }
+
+    /// Forgets the previous frame (a lost frame, a new map).
+    pub fn forget_previous(&mut self) {
+        self.prev.clear();
+    }
+
+    /// Remembers this frame's dynamic-class stereo features (nearer than `far_m`) at its
+    /// final pose `t_wc`, with the log-odds [`Self::decide`] gave them, for the next frame's
+    /// frame-to-frame test (the first [`PREV_CAPACITY`] in frame order).
+    pub fn remember(&mut self, feats: &[Feature], cam: &StereoCamera, t_wc: &Se3, far_m: f32) {
+        self.next.clear();
+        for (i, f) in feats.iter().enumerate() {
+            if !is_dynamic(f.class) || !f.is_stereo() || f.depth_m > far_m {
+                continue;
+            }
+            let pc = cam.backproject(f64::from(f.x), f64::from(f.y), f64::from(f.depth_m));
+            let p_w = t_wc.transform_point(&pc);
+            // A matched feature continues its chain: the anchor stays where the chain began.
+            let (anchor_w, anchor_depth, anchor_level) =
+                match self.prev.get(usize::from(self.prev_of[i])) {
+                    Some(p) => (p.anchor_w, p.anchor_depth, p.anchor_level),
+                    None => (p_w, f.depth_m, f.level),
+                };
+            let p = PrevFeature {
+                p_w,
+                anchor_w,
+                anchor_depth,
+                anchor_level,
+                desc: f.desc,
+                level: f.level,
+                class: f.class,
+                lo: self.lo_out[i],
+            };
+            if self.next.push(p).is_err() {
+                break;
+            }
+        }
+        core::mem::swap(&mut self.prev, &mut self.next);
+    }
+
+    /// The frame-to-frame test: each dynamic-class feature without a landmark match is
+    /// matched to the previous frame's features (same category, ORB distance at most
+    /// `max_hamming` and below `nn_ratio` of the second best, within
+    /// [`MotionParams::track_px`] of where the previous feature projects at `t_cw` if its
+    /// object stood still, each previous feature to one feature) and measured like a landmark
+    /// match: χ² of the previous 3D point at the solved pose, with the previous frame's
+    /// key-point noise added to this one's. A moving object makes no landmarks, so without
+    /// this test most of its features, and every object seen for the first time, would stay
+    /// unproven. Returns how many features it measured.
+    #[allow(clippy::too_many_arguments)]
+    pub fn match_previous(
+        &mut self,
+        feats: &[Feature],
+        cam: &StereoCamera,
+        t_cw: &Se3,
+        far_m: f32,
+        params: &MotionParams,
+        max_hamming: u32,
+        nn_ratio: f32,
+    ) -> u32 {
+        if params.track_px <= 0.0 || self.prev.is_empty() {
+            return 0;
+        }
+        let m = self.prev.len();
+        for j in 0..m {
+            self.prev_claim[j] = NO_CLAIM;
+            let pc = t_cw.transform_point(&self.prev[j].p_w);
+            self.prev_uv[j] = match cam.project(&pc) {
+                Some(uv) if pc.z > 0.0 => [uv.x as f32, uv.y as f32],
+                _ => [0.0, -1.0],
+            };
+        }
+        for (i, f) in feats.iter().enumerate() {
+            if !is_dynamic(f.class) || self.cand[i] != NO_LANDMARK {
+                continue;
+            }
+            let r = params.track_px * level_scale(f.level);
+            let cat = category(f.class);
+            let (mut best, mut second, mut best_j) = (u32::MAX, u32::MAX, usize::MAX);
+            for j in 0..m {
+                let [u, v] = self.prev_uv[j];
+                let p = &self.prev[j];
+                if v < 0.0
+                    || (u - f.x).abs() > r
+                    || (v - f.y).abs() > r
+                    || p.level.abs_diff(f.level) > 1
+                    || category(p.class) != cat
+                {
+                    continue;
+                }
+                let d = hamming(&p.desc, &f.desc);
+                if d < best {
+                    (second, best, best_j) = (best, d, j);
+                } else if d < second {
+                    second = d;
+                }
+            }
+            if best > max_hamming || (second != u32::MAX && best as f32 >= nn_ratio * second as f32)
+            {
+                continue;
+            }
+            // One feature per previous feature: the nearest in ORB distance (ties: the first).
+            let c = self.prev_claim[best_j];
+            if c == NO_CLAIM || best < u32::from(self.prev_dist[best_j]) {
+                self.prev_claim[best_j] = i as u16;
+                self.prev_dist[best_j] = best as u16;
+            }
+        }
+        let mut measured = 0;
+        for j in 0..m {
+            let i = self.prev_claim[j];
+            if i == NO_CLAIM {
+                continue;
+            }
+            let i = usize::from(i);
+            let p = self.prev[j];
+            let f = &feats[i];
+            let mut z = measurement(f, far_m);
+            // The anchor's key-point noise adds to this one's, grown as the object nears
+            // (its disparity error scales with the squared depth ratio).
+            let grow = if f.is_stereo() { (p.anchor_depth / f.depth_m).max(1.0) } else { 1.0 };
+            let grow2 = f64::from(grow * grow);
+            let var_anchor = grow2 * grow2 / level_inv_sigma2(p.anchor_level);
+            z.inv_sigma2 = 1.0 / (1.0 / z.inv_sigma2 + var_anchor);
+            self.prev_of[i] = j as u16;
+            if let Some(c) = chi2(cam, &t_cw.transform_point(&p.anchor_w), &z) {
+                self.prev_lo[i] = p.lo;
+                self.chi2[i] = c as f32;
+                self.gate[i] = z.chi2_threshold() as f32;
+                measured += 1;
+            }
+        }
+        measured
     }
 
     fn find(&mut self, mut i: usize) -> usize {
@@ -359,9 +574,10 @@ impl MotionScratch {
         }
     }
 
-    /// Whether feature `i` has a match measured at the solved pose.
+    /// Whether feature `i` has a match (to a landmark, or frame to frame) measured at the
+    /// solved pose.
     fn measured(&self, i: usize) -> bool {
-        self.cand[i] != crate::map::NO_LANDMARK && self.chi2[i] >= 0.0
+        (self.cand[i] != NO_LANDMARK || !self.prev_lo[i].is_nan()) && self.chi2[i] >= 0.0
     }
 
     /// Whether feature `i`'s match was measured and passed its χ² gate.
@@ -423,15 +639,24 @@ impl MotionScratch {
             }
             let id = self.cand[i];
             let e = self.ev[r].clamp(-params.max_frame_llr, params.max_frame_llr);
-            self.lo_sum[r] += update(id, e);
+            let lo = if id != NO_LANDMARK {
+                update(id, e)
+            } else {
+                // Frame to frame: the previous feature's log-odds carries the evidence.
+                (self.prev_lo[i] + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT)
+            };
+            // Only a measured feature carries log-odds on: an unmeasured one may belong to
+            // another object the segment wrongly joined (a car passing a parked one).
+            self.lo_out[i] = lo;
+            self.lo_sum[r] += lo;
             self.n_lm[r] = self.n_lm[r].saturating_add(1);
         }
         for k in 0..n {
             let i = usize::from(self.dyn_idx[k]);
             let r = self.find(i);
             let evidence = u32::from(self.n_ok[r]) + u32::from(self.n_bad[r]);
-            let post = params.prior_logit(feats[r].class)
-                + if self.n_lm[r] > 0 { self.lo_sum[r] / f32::from(self.n_lm[r]) } else { 0.0 };
+            let lo = if self.n_lm[r] > 0 { self.lo_sum[r] / f32::from(self.n_lm[r]) } else { 0.0 };
+            let post = params.prior_logit(feats[r].class) + lo;
             let state = if evidence >= params.min_evidence && post < STATIC_LOGIT {
                 FeatureMotion::Parked
             } else if evidence > 0 && post > MOVING_LOGIT {
@@ -444,7 +669,7 @@ impl MotionScratch {
             // duplicate the landmark they matched.
             self.blocked[i] = match state {
                 FeatureMotion::Moving => true,
-                FeatureMotion::Unproven => self.cand[i] != crate::map::NO_LANDMARK,
+                FeatureMotion::Unproven => self.cand[i] != NO_LANDMARK,
                 _ => false,
             };
             if i == r {
@@ -468,7 +693,7 @@ impl MotionScratch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::map::NO_LANDMARK;
+    use NO_LANDMARK;
 
     fn feat(x: f32, y: f32, depth: f32, class: u8) -> Feature {
         Feature {
@@ -611,5 +836,129 @@ mod tests {
         let rep = s.decide(&feats, &crate::testing::kitti_cam(), &p, |_, _| -6.0);
         assert_eq!(rep.parked_segments, 1);
         assert_eq!(rep.parked_features, 8);
+    }
+
+    /// A stereo feature of `class` seeing world point `p_w` from pose `t_cw`, with a
+    /// descriptor made from `seed`.
+    fn seen(cam: &StereoCamera, t_cw: &Se3, p_w: Vector3<f64>, class: u8, seed: u8) -> Feature {
+        let z = cam.project_stereo(&t_cw.transform_point(&p_w)).unwrap();
+        let pc = t_cw.transform_point(&p_w);
+        let mut desc = [0u8; 32];
+        for (k, d) in desc.iter_mut().enumerate() {
+            *d = seed.wrapping_mul(37).wrapping_add((k as u8).wrapping_mul(101)) ^ seed;
+        }
+        Feature {
+            x: z.x as f32,
+            y: z.y as f32,
+            level: 0,
+            angle: 0.0,
+            desc,
+            ur: z.z as f32,
+            depth_m: pc.z as f32,
+            class,
+        }
+    }
+
+    /// Objects without landmarks are tested frame to frame: a parked car (its points where the
+    /// ego-motion puts them) becomes parked in its third frame, a car that moved 0.6 m is
+    /// called moving in its second, and the log-odds carry over from frame to frame.
+    #[test]
+    fn objects_without_landmarks_are_tested_frame_to_frame() {
+        let cam = crate::testing::kitti_cam();
+        let p = MotionParams::default();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        // Parked car 12 m ahead on the right, moving car 15 m ahead on the left (it drives
+        // 0.6 m to the left per frame); the camera drives 1 m forward per frame.
+        let parked: std::vec::Vec<Vector3<f64>> = (0..6)
+            .map(|k| Vector3::new(3.0 + 0.3 * f64::from(k), 0.5 + 0.1 * f64::from(k % 2), 12.0))
+            .collect();
+        let moving: std::vec::Vec<Vector3<f64>> = (0..6)
+            .map(|k| Vector3::new(-3.0 - 0.3 * f64::from(k), 0.4 + 0.1 * f64::from(k % 2), 15.0))
+            .collect();
+        let pose =
+            |t: usize| Se3::new(nalgebra::Matrix3::identity(), Vector3::new(0.0, 0.0, -(t as f64)));
+        let frame = |t: usize| -> std::vec::Vec<Feature> {
+            let shift = Vector3::new(-0.6 * t as f64, 0.0, 0.0);
+            let mut f: std::vec::Vec<Feature> = parked
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| seen(&cam, &pose(t), q, 8, k as u8))
+                .collect();
+            f.extend(
+                moving
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &q)| seen(&cam, &pose(t), q + shift, 8, 100 + k as u8)),
+            );
+            f
+        };
+        let far = 40.0 * cam.baseline_m as f32;
+        let mut states = std::vec::Vec::new();
+        for t in 0..3 {
+            let feats = frame(t);
+            s.reset(feats.len());
+            let measured =
+                s.match_previous(&feats, &cam, &pose(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+            assert_eq!(measured, if t == 0 { 0 } else { 12 }, "frame {t}");
+            s.decide(&feats, &cam, &p, |_, _| unreachable!("no landmarks"));
+            states.push((s.state[0], s.state[6], s.lo_out[0], s.lo_out[6]));
+            s.remember(&feats, &cam, &pose(t).inverse(), far);
+        }
+        use FeatureMotion::*;
+        assert_eq!((states[0].0, states[0].1), (Unproven, Unproven), "first sight: no evidence");
+        assert_eq!((states[1].0, states[1].1), (Unproven, Moving));
+        assert_eq!((states[2].0, states[2].1), (Parked, Moving));
+        assert!((states[2].2 + 2.0 * p.max_frame_llr).abs() < 1e-5, "{states:?}");
+        assert!((states[2].3 - 2.0 * p.max_frame_llr).abs() < 1e-5, "{states:?}");
+        // A feature matched to a landmark is measured against it, not frame to frame; a
+        // feature whose descriptor differs is not matched; off, nothing is measured.
+        let mut feats = frame(3);
+        feats[1].desc = [0xff; 32];
+        s.reset(feats.len());
+        s.cand[2] = 7;
+        assert_eq!(s.match_previous(&feats, &cam, &pose(3), far, &p, TRACK_MAX_HAMMING, 0.8), 10);
+        assert!(s.prev_lo[1].is_nan() && s.prev_lo[2].is_nan() && !s.prev_lo[0].is_nan());
+        let off = MotionParams { track_px: 0.0, ..p };
+        s.reset(feats.len());
+        assert_eq!(s.match_previous(&feats, &cam, &pose(3), far, &off, TRACK_MAX_HAMMING, 0.8), 0);
+        s.forget_previous();
+        assert_eq!(s.match_previous(&feats, &cam, &pose(3), far, &p, TRACK_MAX_HAMMING, 0.8), 0);
+    }
+
+    /// A car ahead creeping away along the line of sight (0.3 m per frame while the camera
+    /// drives 1 m) looks static from one frame to the next; measured against where its
+    /// chain of matches began, its motion adds up and it is called moving.
+    #[test]
+    fn a_car_creeping_along_the_line_of_sight_is_caught_by_the_chain_anchor() {
+        let cam = crate::testing::kitti_cam();
+        let p = MotionParams::default();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        let car: std::vec::Vec<Vector3<f64>> = (0..6)
+            .map(|k| Vector3::new(-0.2 + 0.08 * f64::from(k), 0.3 + 0.1 * f64::from(k % 3), 12.0))
+            .collect();
+        let pose =
+            |t: usize| Se3::new(nalgebra::Matrix3::identity(), Vector3::new(0.0, 0.0, -(t as f64)));
+        let far = 40.0 * cam.baseline_m as f32;
+        let mut states = std::vec::Vec::new();
+        for t in 0..6 {
+            let ahead = Vector3::new(0.0, 0.0, 0.3 * t as f64);
+            let feats: std::vec::Vec<Feature> = car
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| seen(&cam, &pose(t), q + ahead, 8, k as u8))
+                .collect();
+            s.reset(feats.len());
+            s.match_previous(&feats, &cam, &pose(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+            assert!((0..feats.len()).all(|i| s.measured(i) == (t > 0)), "frame {t}");
+            s.decide(&feats, &cam, &p, |_, _| unreachable!("no landmarks"));
+            states.push((s.state[0], s.chi2[0]));
+            s.remember(&feats, &cam, &pose(t).inverse(), far);
+        }
+        // One frame's step is within the gate; against the anchor the residual grows every
+        // frame, and a parked call made on the first two frames is taken back.
+        assert!(states[1].1 < 7.8 && states[2].1 < 7.8, "{states:?}");
+        assert!(states.windows(2).skip(1).all(|w| w[1].1 > w[0].1), "{states:?}");
+        assert!(states[3..].iter().all(|&(m, c)| m != FeatureMotion::Parked && c > 7.8));
+        assert_eq!(states[5].0, FeatureMotion::Moving, "{states:?}");
     }
 }

@@ -210,6 +210,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("tracker.motion.link_m", "Largest 3D gap between features of one object, m."),
     ("tracker.motion.min_evidence", "Matched features an object needs before it can be called parked."),
     ("tracker.motion.max_frame_llr", "Largest evidence one frame adds to an object either way, nats."),
+    ("tracker.motion.track_px", "Search radius of the frame-to-frame test for objects without landmarks, px at level 0 (0: off)."),
     ("semantics", "Semantic weighting of features."),
     ("semantics.mode", "\"off\" (geometric), \"cull\" (no features on dynamic classes), \"full\" (the paper: cull dynamic, x3 construction and object classes) or \"motion\" (as full, but dynamic-class features removed only where the object moves)."),
     ("semantics.model", "The int8 segmentation network (.slm); relative to this file's folder. Without one, labels come from the dataset's semantic/ folder."),
@@ -349,6 +350,12 @@ impl Settings {
             if !(v.is_finite() && v > 0.0) {
                 return bad(k, format!("{v} must be finite and > 0"));
             }
+        }
+        if !(t.motion.track_px.is_finite() && t.motion.track_px >= 0.0) {
+            return bad(
+                "tracker.motion.track_px",
+                format!("{} must be finite and ≥ 0", t.motion.track_px),
+            );
         }
         if t.keyframe_max_interval == 0 {
             return bad("tracker.keyframe_max_interval", "must be ≥ 1".into());

@@ -71,6 +71,9 @@ pub(crate) struct NewKeyframe<'a> {
     /// Features that may not create landmarks (on moving objects, [`crate::motion`]); `None`:
     /// all may.
     pub blocked: Option<&'a [bool; FRAME_CAPACITY]>,
+    /// Moving log-odds each feature's new landmark starts with ([`crate::motion`]: what the
+    /// frame-to-frame test learnt of its object); `None`: 0.
+    pub moving_lo: Option<&'a [f32; FRAME_CAPACITY]>,
 }
 
 /// What inserting a keyframe did.
@@ -111,6 +114,8 @@ pub(crate) struct LocalMap {
     lm_compact: [u32; MAX_LANDMARKS],
     /// The current keyframe's features that may not create landmarks.
     blocked: [bool; FRAME_CAPACITY],
+    /// The current keyframe's moving log-odds per feature, for the landmarks it creates.
+    init_lo: [f32; FRAME_CAPACITY],
 }
 
 impl LocalMap {
@@ -133,6 +138,7 @@ impl LocalMap {
             ba_ids: [0; MAX_LANDMARKS],
             lm_compact: [u32::MAX; MAX_LANDMARKS],
             blocked: [false; FRAME_CAPACITY],
+            init_lo: [0.0; FRAME_CAPACITY],
         };
         m.map.clear();
         m
@@ -177,6 +183,10 @@ impl LocalMap {
         match kf.blocked {
             Some(b) => self.blocked[..feats.len()].copy_from_slice(&b[..feats.len()]),
             None => self.blocked[..feats.len()].fill(false),
+        }
+        match kf.moving_lo {
+            Some(lo) => self.init_lo[..feats.len()].copy_from_slice(&lo[..feats.len()]),
+            None => self.init_lo[..feats.len()].fill(0.0),
         }
         let center = kf.t_cw.inverse().trans;
         for (i, f) in feats.iter().enumerate() {
@@ -254,7 +264,9 @@ impl LocalMap {
                 break;
             };
             self.map.add_observation(slot, i, id);
-            note_semantics(self.map.lm_mut(id), f, frame.sem[i]);
+            let l = self.map.lm_mut(id);
+            note_semantics(l, f, frame.sem[i]);
+            l.moving_lo = self.init_lo[i];
             created += 1;
         }
         created
@@ -336,6 +348,7 @@ impl LocalMap {
                 let l = self.map.lm_mut(id);
                 note_semantics(l, &f1, frame.sem[i1]);
                 note_semantics(l, &f2, None);
+                l.moving_lo = self.init_lo[i1];
                 created += 1;
             }
         }

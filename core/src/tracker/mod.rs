@@ -394,6 +394,7 @@ impl Tracker {
     /// Forgets the map and the motion; the next frame initialises again at the identity.
     pub fn reset(&mut self) {
         self.map.clear();
+        self.motion.forget_previous();
         self.last_features = 0;
         self.solved = false;
         self.state = TrackState::Uninitialised;
@@ -521,6 +522,12 @@ impl Tracker {
             self.stats.untracked_frames += 1;
         }
         rep.t_wc = self.t_cw.inverse();
+        // The frame-to-frame motion test compares the next frame with this one's final pose.
+        if self.motion_aware && self.solved {
+            self.motion.remember(&frame.features, &self.cam, &rep.t_wc, self.problem.far_m);
+        } else {
+            self.motion.forget_previous();
+        }
         rep.state = self.state;
         rep.landmarks = self.map.map().landmark_count() as u32;
         rep.keyframes = self.map.map().len() as u32;
@@ -731,6 +738,15 @@ impl Tracker {
                 None => self.motion.chi2[i] = -1.0,
             }
         }
+        self.motion.match_previous(
+            feats,
+            &self.cam,
+            &self.t_cw,
+            self.problem.far_m,
+            &self.params.motion,
+            self.params.max_hamming.min(crate::motion::TRACK_MAX_HAMMING),
+            self.params.nn_ratio,
+        );
         let report = self.motion.decide(feats, &self.cam, &self.params.motion, |id, e| {
             let l = window.lm_mut(id);
             l.moving_lo = (l.moving_lo + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
@@ -855,6 +871,7 @@ impl Tracker {
             landmark: &self.matches.lm,
             weight: &self.matches.weight,
             blocked: self.motion_aware.then_some(&self.motion.blocked),
+            moving_lo: self.motion_aware.then_some(&self.motion.lo_out),
         };
         let out = self.map.insert_keyframe(&self.cam, &params, &kf, self.frame_index);
         rep.new_landmarks = out.new_landmarks + out.triangulated;
