@@ -122,6 +122,7 @@ fn out_of_range_values_are_refused_with_their_key() {
         ("[tracker]\nwide_radius_px = nan\n", "tracker.wide_radius_px"),
         ("[tracker.em]\ntau_orb = -1.0\n", "tracker.em.tau_orb"),
         ("[tracker.motion]\nprior_vehicle = 0.0\n", "tracker.motion.prior_vehicle"),
+        ("[tracker.motion]\ntrack_px = -1.0\n", "tracker.motion.track_px"),
         ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\n", "camera"),
         ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\nbaseline = 1.0\n", "camera"),
         ("[camera]\nfx = -1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\n", "camera.fx"),
