@@ -232,8 +232,9 @@ pub(crate) struct MotionScratch {
     /// Frame to frame: the moving log-odds of the previous-frame feature this feature matched
     /// (NaN if none; only for features without a landmark match).
     prev_lo: [f32; FRAME_CAPACITY],
-    /// The feature's moving log-odds after this frame (its object's, without the class
-    /// prior): carried to the next frame and into the landmark it creates.
+    /// The feature's moving log-odds after this frame, without the class prior: its
+    /// landmark's, or its frame-to-frame chain's, updated with its segment's evidence (0 when
+    /// it was not measured). Carried to the next frame and into the landmark it creates.
     pub lo_out: [f32; FRAME_CAPACITY],
     /// The previous frame's dynamic-class stereo features (world points at its pose).
     prev: Vec<PrevFeature, PREV_CAPACITY>,
@@ -335,8 +336,9 @@ impl MotionScratch {
     /// `max_hamming` and below `nn_ratio` of the second best, within
     /// [`MotionParams::track_px`] of where the previous feature projects at `t_cw` if its
     /// object stood still, each previous feature to one feature) and measured like a landmark
-    /// match: χ² of the previous 3D point at the solved pose, with the previous frame's
-    /// key-point noise added to this one's. A moving object makes no landmarks, so without
+    /// match: χ² at the solved pose of the 3D point where the chain of such matches began,
+    /// with that observation's key-point noise (grown as the object nears) added to this
+    /// one's. A moving object makes no landmarks, so without
     /// this test most of its features, and every object seen for the first time, would stay
     /// unproven. Returns how many features it measured.
     #[allow(clippy::too_many_arguments)]
