@@ -52,8 +52,10 @@
 //!
 //! The EM association sees the outcome through its candidates: held features have none.
 //!
-//! Memory: [`MotionScratch`] is ≈ 54 KiB of per-frame arrays; the per-landmark log-odds live
-//! in [`crate::map::Landmark::moving_lo`]. No allocation, deterministic.
+//! Memory: the tracker's `MotionScratch` is ≈ 304 KiB: per-frame arrays, and the previous
+//! and current frame's dynamic-class stereo features for the frame-to-frame test (up to
+//! [`PREV_CAPACITY`] each, ≈ 96 KiB per list). The per-landmark log-odds live in
+//! [`crate::map::Landmark::moving_lo`]. No allocation, deterministic.
 
 use heapless::Vec;
 use nalgebra::Vector3;
