@@ -863,6 +863,25 @@ mod tests {
         }
     }
 
+    /// Pose of frame `t` of a camera driving 1 m forward per frame.
+    fn driving(t: usize) -> Se3 {
+        Se3::new(nalgebra::Matrix3::identity(), Vector3::new(0.0, 0.0, -(t as f64)))
+    }
+
+    /// One frame of the motion test on objects without landmarks (KITTI camera, default
+    /// settings): match to the previous frame, decide, remember; returns how many features
+    /// were measured frame to frame.
+    fn landmarkless_frame(s: &mut MotionScratch, feats: &[Feature], t: usize) -> u32 {
+        let cam = crate::testing::kitti_cam();
+        let p = MotionParams::default();
+        let far = 40.0 * cam.baseline_m as f32;
+        s.reset(feats.len());
+        let measured = s.match_previous(feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+        s.decide(feats, &cam, &p, |_, _| unreachable!("no landmarks"));
+        s.remember(feats, &cam, &driving(t).inverse(), far);
+        measured
+    }
+
     /// Objects without landmarks are tested frame to frame: a parked car (its points where the
     /// ego-motion puts them) becomes parked in its third frame, a car that moved 0.6 m is
     /// called moving in its second, and the log-odds carry over from frame to frame.
@@ -879,8 +898,7 @@ mod tests {
         let moving: std::vec::Vec<Vector3<f64>> = (0..6)
             .map(|k| Vector3::new(-3.0 - 0.3 * f64::from(k), 0.4 + 0.1 * f64::from(k % 2), 15.0))
             .collect();
-        let pose =
-            |t: usize| Se3::new(nalgebra::Matrix3::identity(), Vector3::new(0.0, 0.0, -(t as f64)));
+        let pose = driving;
         let frame = |t: usize| -> std::vec::Vec<Feature> {
             let shift = Vector3::new(-0.6 * t as f64, 0.0, 0.0);
             let mut f: std::vec::Vec<Feature> = parked
@@ -899,14 +917,9 @@ mod tests {
         let far = 40.0 * cam.baseline_m as f32;
         let mut states = std::vec::Vec::new();
         for t in 0..3 {
-            let feats = frame(t);
-            s.reset(feats.len());
-            let measured =
-                s.match_previous(&feats, &cam, &pose(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+            let measured = landmarkless_frame(&mut s, &frame(t), t);
             assert_eq!(measured, if t == 0 { 0 } else { 12 }, "frame {t}");
-            s.decide(&feats, &cam, &p, |_, _| unreachable!("no landmarks"));
             states.push((s.state[0], s.state[6], s.lo_out[0], s.lo_out[6]));
-            s.remember(&feats, &cam, &pose(t).inverse(), far);
         }
         use FeatureMotion::*;
         assert_eq!((states[0].0, states[0].1), (Unproven, Unproven), "first sight: no evidence");
@@ -935,28 +948,21 @@ mod tests {
     #[test]
     fn a_car_creeping_along_the_line_of_sight_is_caught_by_the_chain_anchor() {
         let cam = crate::testing::kitti_cam();
-        let p = MotionParams::default();
         let mut s = std::boxed::Box::new(MotionScratch::new());
         let car: std::vec::Vec<Vector3<f64>> = (0..6)
             .map(|k| Vector3::new(-0.2 + 0.08 * f64::from(k), 0.3 + 0.1 * f64::from(k % 3), 12.0))
             .collect();
-        let pose =
-            |t: usize| Se3::new(nalgebra::Matrix3::identity(), Vector3::new(0.0, 0.0, -(t as f64)));
-        let far = 40.0 * cam.baseline_m as f32;
         let mut states = std::vec::Vec::new();
         for t in 0..6 {
             let ahead = Vector3::new(0.0, 0.0, 0.3 * t as f64);
             let feats: std::vec::Vec<Feature> = car
                 .iter()
                 .enumerate()
-                .map(|(k, &q)| seen(&cam, &pose(t), q + ahead, 8, k as u8))
+                .map(|(k, &q)| seen(&cam, &driving(t), q + ahead, 8, k as u8))
                 .collect();
-            s.reset(feats.len());
-            s.match_previous(&feats, &cam, &pose(t), far, &p, TRACK_MAX_HAMMING, 0.8);
-            assert!((0..feats.len()).all(|i| s.measured(i) == (t > 0)), "frame {t}");
-            s.decide(&feats, &cam, &p, |_, _| unreachable!("no landmarks"));
+            let measured = landmarkless_frame(&mut s, &feats, t);
+            assert_eq!(measured as usize, if t == 0 { 0 } else { feats.len() }, "frame {t}");
             states.push((s.state[0], s.chi2[0]));
-            s.remember(&feats, &cam, &pose(t).inverse(), far);
         }
         // One frame's step is within the gate; against the anchor the residual grows every
         // frame, and a parked call made on the first two frames is taken back.
