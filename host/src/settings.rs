@@ -194,6 +194,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("tracker.triangulate", "Triangulate new landmarks between covisible keyframes."),
     ("tracker.cull_keyframes", "Remove redundant keyframes (90 % of their points seen by 3 others)."),
     ("tracker.ransac_iterations", "RANSAC hypotheses per frame before pose optimisation (0: off)."),
+    ("tracker.ransac_seed", "Varies RANSAC's hypotheses (0: the default); a few seeds show a result's run-to-run spread."),
     ("tracker.association", "Data association: \"hard\" (nearest neighbour, ORB-SLAM2) or \"em\" (probabilistic, Bowman et al. 2017)."),
     ("tracker.em", "EM association (used when association = \"em\")."),
     ("tracker.em.iterations", "E and M steps per frame."),

@@ -65,7 +65,7 @@ fn run_takes_its_parameters_from_the_settings_file_and_flags_override_it() {
     std::fs::write(
         &f,
         "[orb]\nn_features = 1000\n[stereo]\nsad_half_window = 4\n[tracker]\nassociation = \"em\"\n\
-         ransac_iterations = 50\n[tracker.em]\niterations = 2\n",
+         ransac_iterations = 50\nransac_seed = 7\n[tracker.em]\niterations = 2\n",
     )
     .unwrap();
     let out = dir.path().join("a");
@@ -76,6 +76,7 @@ fn run_takes_its_parameters_from_the_settings_file_and_flags_override_it() {
     assert_eq!(p["stereo"]["sad_half_window"], 4);
     assert_eq!(p["tracker"]["association"], "em");
     assert_eq!(p["tracker"]["ransac_iterations"], 50);
+    assert_eq!(p["tracker"]["ransac_seed"], 7);
     assert_eq!(p["tracker"]["em"]["iterations"], 2);
     assert_eq!(p["settings_file"], s(&f));
     assert_eq!(p["camera_from"], "dataset");
@@ -94,6 +95,8 @@ fn run_takes_its_parameters_from_the_settings_file_and_flags_override_it() {
         "hard",
         "--ransac-iterations",
         "20",
+        "--ransac-seed",
+        "3",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let p = &summary(&out)["provenance"];
@@ -101,6 +104,7 @@ fn run_takes_its_parameters_from_the_settings_file_and_flags_override_it() {
         (&p["tracker"]["association"], &p["tracker"]["ransac_iterations"]),
         (&"hard".into(), &20.into())
     );
+    assert_eq!(p["tracker"]["ransac_seed"], 3);
     assert_eq!(p["orb"]["n_features"], 1000);
     // Fewer features really reach the extractor: the run differs from the defaults'.
     let out_d = dir.path().join("d");

@@ -100,6 +100,9 @@ pub(crate) struct SearchQuery {
     pub max_hamming: u32,
     /// Best/second-best ratio when both are on the same level.
     pub nn_ratio: f32,
+    /// Apply the ratio test whatever the second-best's level (matching by appearance alone,
+    /// where no position narrows the candidates down).
+    pub ratio_any_level: bool,
     /// Count the pass in each projected landmark's `visible` (the final pass only).
     pub count_visible: bool,
     /// With a gate, also record every candidate within it for EM.
@@ -205,7 +208,9 @@ impl ProjectionSearch {
             if best.0 > q.max_hamming || best.1 == usize::MAX {
                 continue;
             }
-            if best.2 == second.1 && (best.0 as f32) > q.nn_ratio * second.0 as f32 {
+            if (q.ratio_any_level || best.2 == second.1)
+                && (best.0 as f32) > q.nn_ratio * second.0 as f32
+            {
                 continue;
             }
             let fi = best.1;

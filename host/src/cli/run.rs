@@ -47,6 +47,11 @@ pub struct RunArgs {
     /// settings file's.
     #[arg(long, value_name = "N")]
     pub ransac_iterations: Option<u32>,
+    /// Varies RANSAC's hypotheses (0: the default stream). Tracking is deterministic, so one
+    /// run is one sample; a few seeds show how far a result moves from run to run, as
+    /// ORB-SLAM2's results do. Default: 0, or the settings file's `tracker.ransac_seed`.
+    #[arg(long, value_name = "SEED")]
+    pub ransac_seed: Option<u64>,
     /// Semantic weighting of features: `off` (geometric backbone), `cull` (no features on
     /// dynamic classes), `full` (the paper's semantic ORB: cull dynamic, ×3 construction and
     /// object classes), `motion` (as full, but features on cars, pedestrians and cyclists are removed
@@ -179,6 +184,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let mut tracker = settings.tracker;
     if let Some(n) = args.ransac_iterations {
         tracker.ransac_iterations = n;
+    }
+    if let Some(seed) = args.ransac_seed {
+        tracker.ransac_seed = seed;
     }
     if let Some(a) = args.assoc {
         tracker.association = a.into();
