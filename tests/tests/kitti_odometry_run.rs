@@ -9,6 +9,7 @@
 //! ATE ≤ 0.030 m (it: 0.022–0.027 m; measured 0.025 m) and RPE rotation ≤ 0.075° (it: 0.065°;
 //! measured 0.067°). No frame may be lost, and one worker thread and two agree byte for byte.
 
+use semloc_core::assoc::Association;
 use std::path::Path;
 
 use semloc::dataset::Sequence;
@@ -59,40 +60,64 @@ fn kitti_06_clip_at_orb_slam2_accuracy() {
     check_clip("06", 0.030, 0.075);
 }
 
-/// Motion-aware semantics with the committed int8 network and EM against the geometric
-/// backbone on one clip: (backbone ATE, motion + EM ATE), both Sim(3), neither lost.
-fn motion_vs_backbone(seq_id: &str) -> Option<(f64, f64)> {
+/// One run of a clip, Sim(3)-aligned: its ATE (m); the run must not lose a frame.
+fn clip_ate(seq_id: &str, motion: bool, association: Association, ransac_seed: u64) -> Option<f64> {
     let data = semloc_tests::shared_data()?;
     let seq = Sequence::open_odometry(&data.join("kitti-odometry"), seq_id, None).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let model =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/artefacts/fastscnn_r2_192x640.slm");
-    let base = run(RunConfig { align: Align::Sim3, ..RunConfig::new(&seq, dir.path().join("b")) });
-    let motion = run(RunConfig {
+    let r = run(RunConfig {
         align: Align::Sim3,
-        semantics: semloc::run::Semantics::Motion,
-        network: Some(semloc::run::Network::File(model)),
+        semantics: if motion {
+            semloc::run::Semantics::Motion
+        } else {
+            semloc::run::Semantics::Off
+        },
+        network: motion.then_some(semloc::run::Network::File(model)),
         tracker: semloc_core::tracker::TrackerParams {
-            association: semloc_core::assoc::Association::Em,
+            association,
+            ransac_seed,
             ..Default::default()
         },
-        ..RunConfig::new(&seq, dir.path().join("m"))
+        ..RunConfig::new(&seq, dir.path().join("r"))
     });
-    assert_eq!((base.summary.lost, motion.summary.lost), (0, 0));
-    let (b, m) = (base.eval.unwrap().ate_rmse_m, motion.eval.unwrap().ate_rmse_m);
-    eprintln!("KITTI {seq_id} clip: Sim(3) ATE backbone {b:.4} m, motion-aware + EM {m:.4} m");
-    Some((b, m))
+    assert_eq!(r.summary.lost, 0, "{seq_id}: frames lost");
+    Some(r.eval.unwrap().ate_rmse_m)
 }
 
 /// Issue 15: semantics must not make real traffic worse. Table-1 culling with this network
-/// broke the 01 clip (0.76 m against 0.032 m); motion-aware semantics measured 0.0337 m there
-/// and 0.0205 m against 0.0234 m on 06 (2026-11-24). The bound leaves 10 % for the spread of a
-/// 51-frame clip.
+/// broke the 01 clip (0.76 m against 0.032 m). Motion-aware semantics are compared with the
+/// geometric rows of the same association (2026-11-26, Sim(3)): 01 hard 0.0322 against
+/// 0.0321 m, EM 0.0366 against 0.0345 m; 06 hard 0.0238 against 0.0234 m, EM 0.0211 against
+/// 0.0209 m. The bound leaves 10 % for the spread of a 51-frame clip. (EM itself costs 7 % on
+/// 01 against hard association, 13 % with motion-aware semantics: an open item of issue 15.)
 #[test]
 #[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
 fn motion_aware_semantics_keep_real_clips_at_backbone_accuracy() {
     for seq_id in ["01", "06"] {
-        let Some((b, m)) = motion_vs_backbone(seq_id) else { return };
-        assert!(m <= 1.10 * b, "{seq_id}: motion-aware + EM {m:.4} m vs backbone {b:.4} m");
+        for association in [Association::Hard, Association::Em] {
+            let Some(b) = clip_ate(seq_id, false, association, 0) else { return };
+            let m = clip_ate(seq_id, true, association, 0).unwrap();
+            eprintln!("KITTI {seq_id} clip, {association:?}: Sim(3) ATE off {b:.4} m, motion-aware {m:.4} m");
+            assert!(
+                m <= 1.10 * b,
+                "{seq_id} {association:?}: motion-aware {m:.4} m vs off {b:.4} m"
+            );
+        }
+    }
+}
+
+/// The first frame after initialisation has no motion estimate. Projected at the last pose,
+/// only far points matched on the 01 clip (the car moves ~1 m per frame), and the pose hung
+/// on RANSAC's draws: with seeds 1, 4 and 5 the backbone's Sim(3) ATE was 0.55, 0.56 and
+/// 0.14 m (seed 0: 0.032 m). Matched by appearance, every seed gives 0.032-0.033 m.
+#[test]
+#[ignore = "real data in ../shared/data; run with --ignored (CI does)"]
+fn kitti_01_does_not_depend_on_ransac_draws() {
+    for seed in [1, 4, 5] {
+        let Some(ate) = clip_ate("01", false, Association::Hard, seed) else { return };
+        eprintln!("KITTI 01 clip, RANSAC seed {seed}: Sim(3) ATE {ate:.4} m");
+        assert!(ate < 0.04, "RANSAC seed {seed}: Sim(3) ATE {ate:.4} m");
     }
 }
