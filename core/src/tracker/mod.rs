@@ -6,7 +6,9 @@
 //! 2. search: project the landmarks of the local map (the keyframes observing what the last
 //!    frame matched and their covisible neighbours, [`crate::map::LocalSet`]) and match them by
 //!    nearest neighbour ([`crate::assoc`]) — a wide pass, a motion-only pose optimisation (and
-//!    one from a RANSAC start when that is better supported); then, as ORB-SLAM2's
+//!    one from a RANSAC start when that is better supported); without a motion estimate (the
+//!    first frame after initialisation) the first pass matches by appearance alone over the
+//!    whole image instead, as ORB-SLAM2's `TrackReferenceKeyFrame`; then, as ORB-SLAM2's
 //!    `TrackLocalMap`, the local map around this frame's own matches in a narrow pass;
 //! 3. associate and optimise: nearest neighbour with a final pose optimisation whose outliers
 //!    are unlinked, or EM over the gated candidates (paper §3.3, [`crate::assoc::em`]);
