@@ -671,12 +671,18 @@ impl Tracker {
             count_visible: last,
             em_gate: em.then_some(self.params.em.max_hamming),
         };
+        self.search_local_map(feats, &q)
+    }
+
+    /// Matches the local map's landmarks to `feats` as `q` says (into `matches` and, with an EM
+    /// gate, EM's candidates); returns the number of matched features.
+    fn search_local_map(&mut self, feats: &[Feature], q: &SearchQuery) -> u32 {
         self.search.search(
             self.map.map_mut(),
             &self.local.lms,
             &self.cam,
             feats,
-            &q,
+            q,
             &mut self.matches,
             &mut self.em.cands,
         )
@@ -701,15 +707,7 @@ impl Tracker {
             count_visible: false,
             em_gate: None,
         };
-        self.search.search(
-            self.map.map_mut(),
-            &self.local.lms,
-            &self.cam,
-            feats,
-            &q,
-            &mut self.matches,
-            &mut self.em.cands,
-        )
+        self.search_local_map(feats, &q)
     }
 
     /// Motion-aware semantics: takes the matches of dynamic-class features whose landmark is
