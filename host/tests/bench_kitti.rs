@@ -38,6 +38,8 @@ fn every_sequence_in_one_table_with_a_reference() {
         s(reference.path()),
         "--reference-name",
         "ORB-SLAM2",
+        "--seeds",
+        "2",
     ]);
     assert!(o.status.success(), "{}", text(&o));
     let table = std::fs::read_to_string(out.join("bench.txt")).unwrap();
@@ -48,6 +50,7 @@ fn every_sequence_in_one_table_with_a_reference() {
         lines.iter().any(|l| l.starts_with("00 ")) && lines.iter().any(|l| l.starts_with("01 "))
     );
     assert!(table.contains("01 ORB-SLAM2:"), "the missing reference is explained: {table}");
+    assert!(table.contains("ATE [m] over RANSAC seeds 0-1"), "{table}");
 
     let rows: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("bench.json")).unwrap()).unwrap();
@@ -64,6 +67,14 @@ fn every_sequence_in_one_table_with_a_reference() {
         )
         .unwrap();
         assert_eq!(cells[0]["ate_rmse_m"], eval["ate_rmse_m"]);
+        // --seeds 2: seed 0's ATE, then seed 1's run beside it.
+        let seeded: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join(seq).join("off-hard-seed1/eval.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(cells[0]["ate_seeds_m"][0], eval["ate_rmse_m"]);
+        assert_eq!(cells[0]["ate_seeds_m"][1], seeded["ate_rmse_m"]);
+        assert_eq!(cells[1]["ate_seeds_m"].as_array().map(Vec::len), Some(0), "reference");
         assert!(cells[0]["ate_rmse_m"].as_f64().unwrap() < 0.05, "{row}");
         // 8 frames are far from 100 m: the devkit figures are n/a, not 0.
         assert!(cells[0]["t_rel_pct"].is_null());

@@ -280,6 +280,79 @@ fn ablate_runs_every_combination_into_one_table() {
     assert!(pct("structure_pct_semantic") > pct("structure_pct_plain"), "{share}");
 }
 
+/// `--seeds N` tracks every row with RANSAC seeds 0..N-1: seed 0 in the row's folder, the
+/// others beside it, each recording its seed; the table and JSON give the ATE over seeds.
+#[test]
+fn ablate_seeds_runs_every_row_per_ransac_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("synth");
+    let o = semloc(&[
+        "synth",
+        "--out",
+        data.to_str().unwrap(),
+        "--frames",
+        "10",
+        "--dynamics",
+        "low",
+        "--seed",
+        "5",
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let out = dir.path().join("abl");
+    let args = |seeds: &str| {
+        [
+            "ablate",
+            data.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--force",
+            "--semantics",
+            "off",
+            "--assoc",
+            "hard",
+            "--seeds",
+            seeds,
+        ]
+        .map(str::to_owned)
+    };
+    let o = semloc(&args("3").each_ref().map(String::as_str));
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    assert!(stdout.contains("ATE, 3 seeds [m]") && stdout.contains("median (min-max)"), "{stdout}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    assert_eq!(v["seeds"], 3);
+    let row = &v["rows"][0];
+    let ates: Vec<f64> =
+        row["ate_rmse_m_seeds"].as_array().unwrap().iter().map(|a| a.as_f64().unwrap()).collect();
+    assert_eq!(ates.len(), 3, "{row}");
+    assert_eq!(ates[0], row["ate_rmse_m"].as_f64().unwrap(), "seed 0 is the row's own run");
+    let mut sorted = ates.clone();
+    sorted.sort_by(f64::total_cmp);
+    assert_eq!(row["ate_median_m"].as_f64(), Some(sorted[1]), "{row}");
+    for (seed, folder) in [(0, "off-hard"), (1, "off-hard-seed1"), (2, "off-hard-seed2")] {
+        let d = out.join(folder);
+        assert!(d.join("trajectory.txt").is_file(), "{}", d.display());
+        let s: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(s["provenance"]["tracker"]["ransac_seed"], seed, "{folder}");
+        let eval: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("eval.json")).unwrap()).unwrap();
+        let ate = eval["ate_rmse_m"].as_f64().or_else(|| eval["ate"]["rmse"].as_f64()).unwrap();
+        assert_eq!(ate, ates[seed], "{folder}");
+    }
+    // A later run with fewer seeds removes the extra seed folders it wrote before.
+    let o = semloc(&args("1").each_ref().map(String::as_str));
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    assert!(!stdout.contains("median (min-max)"), "{stdout}");
+    assert!(out.join("off-hard").is_dir() && !out.join("off-hard-seed1").exists());
+    // Out of range is refused.
+    let o = semloc(&args("17").each_ref().map(String::as_str));
+    assert_eq!(o.status.code(), Some(2), "{:?}", text(&o));
+}
+
 #[test]
 fn ablate_without_labels_names_the_missing_folder() {
     let dir = tempfile::tempdir().unwrap();

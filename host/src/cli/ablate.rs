@@ -58,7 +58,17 @@ pub struct AblateArgs {
     /// ATE alignment (see `semloc eval --help`).
     #[arg(long, value_enum, ignore_case = true, default_value_t = AlignArg::Se3)]
     pub align: AlignArg,
+    /// Track every row N times, with RANSAC seeds 0 to N-1 (`semloc run --ransac-seed`), and
+    /// report the ATE's median and range over them beside seed 0's figures (N ≤ 16). Tracking
+    /// is deterministic, so one run is one sample; ORB-SLAM2's published figures are ranges
+    /// over runs too. Seed 0's outputs go to `<semantics>-<assoc>/`, seed K's to
+    /// `<semantics>-<assoc>-seedK/`.
+    #[arg(long, default_value_t = 1, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=MAX_SEEDS))]
+    pub seeds: u8,
 }
+
+/// Most RANSAC seeds `--seeds` runs per row.
+pub const MAX_SEEDS: i64 = 16;
 
 /// One row of an ablation or demo table.
 pub struct Row {
@@ -68,6 +78,28 @@ pub struct Row {
     pub assoc: Association,
     /// What the run produced.
     pub outcome: RunResult,
+    /// ATE RMSE (m) of every run of the row, RANSAC seed 0 first (one entry without
+    /// `--seeds`); a run without an evaluation has none.
+    pub seed_ates: Vec<f64>,
+}
+
+/// Median, minimum and maximum of a non-empty list.
+pub fn median_min_max(v: &[f64]) -> (f64, f64, f64) {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    let median = if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) };
+    (median, v[0], v[n - 1])
+}
+
+impl Row {
+    /// Median, minimum and maximum of [`Row::seed_ates`], when there are two or more.
+    pub fn seed_spread(&self) -> Option<(f64, f64, f64)> {
+        if self.seed_ates.len() < 2 {
+            return None;
+        }
+        Some(median_min_max(&self.seed_ates))
+    }
 }
 
 /// One row of `ablation.json`.
@@ -92,6 +124,9 @@ struct JsonRow<'a> {
     /// sequence's moving-object mask (synthetic sequences), else null.
     moving_precision: Option<f64>,
     moving_recall: Option<f64>,
+    /// `--seeds`: the ATE of each RANSAC seed's run (seed 0 first) and their median.
+    ate_rmse_m_seeds: &'a [f64],
+    ate_median_m: Option<f64>,
     folder: &'a str,
 }
 
@@ -110,9 +145,19 @@ struct Share {
 /// Formats the table of `rows` (one line each), as `semloc ablate` and `semloc demo` print it.
 pub fn table(rows: &[Row]) -> String {
     let mut s = String::new();
+    let seeds = rows.iter().map(|r| r.seed_ates.len()).max().unwrap_or(0);
+    let spread_col = |top: bool| {
+        if seeds < 2 {
+            String::new()
+        } else if top {
+            format!("{:>22}", format!("ATE, {seeds} seeds [m]"))
+        } else {
+            format!("{:>22}", "median (min-max)")
+        }
+    };
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}{:>12}",
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}{:>12}{}",
         "semantics",
         "assoc",
         "ATE [m]",
@@ -125,12 +170,26 @@ pub fn table(rows: &[Row]) -> String {
         "lost",
         "culled",
         "EM changed",
-        "moving P/R"
+        "moving P/R",
+        spread_col(true)
     );
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}{:>12}",
-        "", "", "", "of len", "", "100 m]", "[m / deg]", "median", "", "", "/frame", "total", "[%]"
+        "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9}{:>11}{:>12}{}",
+        "",
+        "",
+        "",
+        "of len",
+        "",
+        "100 m]",
+        "[m / deg]",
+        "median",
+        "",
+        "",
+        "/frame",
+        "total",
+        "[%]",
+        spread_col(false)
     );
     for r in rows {
         let e = r.outcome.eval.as_ref();
@@ -138,7 +197,7 @@ pub fn table(rows: &[Row]) -> String {
         let compute = r.outcome.summary.timing.get("compute");
         let _ = writeln!(
             s,
-            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9.0}{:>11}{:>12}",
+            "{:<10}{:<6}{:>9}{:>8}{:>10}{:>11}{:>16}{:>10}{:>9}{:>6}{:>9.0}{:>11}{:>12}{}",
             r.semantics.name(),
             association_name(r.assoc),
             f(e.map(|e| e.ate_rmse_m), 3),
@@ -159,6 +218,19 @@ pub fn table(rows: &[Row]) -> String {
                 100.0 * p,
                 100.0 * r
             )),
+            match (seeds, r.seed_spread()) {
+                (0 | 1, _) => String::new(),
+                (_, Some((m, lo, hi))) => format!("{:>22}", format!("{m:.3} ({lo:.3}-{hi:.3})")),
+                (_, None) => format!("{:>22}", "n/a"),
+            },
+        );
+    }
+    if seeds >= 2 {
+        let _ = writeln!(
+            s,
+            "\nEvery column but the last is RANSAC seed 0's run; the last is the ATE over seeds \
+             0-{} (`semloc run --ransac-seed`).",
+            seeds - 1
         );
     }
     s
@@ -178,22 +250,42 @@ pub fn run_rows<'a>(
     pairs: &[(Semantics, Association)],
     out: &std::path::Path,
 ) -> Result<Vec<Row>> {
+    run_rows_seeded(base, pairs, out, 0)
+}
+
+/// As [`run_rows`] with RANSAC seed `seed` (`semloc run --ransac-seed`); seed 0 leaves
+/// `base()`'s and writes each row to `<semantics>-<assoc>/`, any other to
+/// `<semantics>-<assoc>-seed<seed>/`.
+pub fn run_rows_seeded<'a>(
+    base: &dyn Fn() -> RunConfig<'a>,
+    pairs: &[(Semantics, Association)],
+    out: &std::path::Path,
+    seed: u64,
+) -> Result<Vec<Row>> {
+    let (suffix, label) = if seed == 0 {
+        (String::new(), String::new())
+    } else {
+        (format!("-seed{seed}"), format!(" (RANSAC seed {seed})"))
+    };
     let mut rows = Vec::new();
     let stop = semloc::run::StopFlag::new();
     stop.register_signals().context("installing the SIGINT/SIGTERM handlers")?;
     for &(semantics, assoc) in pairs {
         let (s, a) = (semantics.name(), association_name(assoc));
-        let dir = out.join(format!("{s}-{a}"));
+        let dir = out.join(format!("{s}-{a}{suffix}"));
         let mut cfg = base();
         cfg.out = dir.clone();
         cfg.stop = Some(stop.clone());
         cfg.semantics = semantics;
         cfg.tracker.association = assoc;
+        if seed != 0 {
+            cfg.tracker.ransac_seed = seed;
+        }
         if semantics == Semantics::Off {
             // the network is only needed (and only timed) where labels are used
             cfg.network = None;
         }
-        eprintln!("{s} / {a} ...");
+        eprintln!("{s} / {a}{label} ...");
         let outcome = run_with_progress(cfg)?;
         super::print_warnings(&outcome.warnings);
         if let Some(e) = &outcome.failure {
@@ -214,7 +306,8 @@ pub fn run_rows<'a>(
                 dir.display()
             );
         }
-        rows.push(Row { semantics, assoc, outcome });
+        let seed_ates = outcome.eval.iter().map(|e| e.ate_rmse_m).collect();
+        rows.push(Row { semantics, assoc, outcome, seed_ates });
     }
     Ok(rows)
 }
@@ -273,7 +366,14 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         .iter()
         .flat_map(|&s| args.assoc.iter().map(move |&a| (s.into(), a.into())))
         .collect();
-    let rows = run_rows(&base, &pairs, &args.out)?;
+    let mut rows = run_rows(&base, &pairs, &args.out)?;
+    for seed in 1..u64::from(args.seeds) {
+        let more = run_rows_seeded(&base, &pairs, &args.out, seed)?;
+        for (row, other) in rows.iter_mut().zip(more) {
+            // A run without an evaluation (no ground truth) has no ATE to add.
+            row.seed_ates.extend(other.seed_ates);
+        }
+    }
     let n = base().frame_count();
     let share = if labelled { Some(feature_share(&seq, args.model.as_ref(), n)?) } else { None };
 
@@ -343,6 +443,8 @@ pub fn run(args: &AblateArgs) -> Result<()> {
                     .as_ref()
                     .and_then(|m| m.moving_precision),
                 moving_recall: r.outcome.summary.motion.as_ref().and_then(|m| m.moving_recall),
+                ate_rmse_m_seeds: &r.seed_ates,
+                ate_median_m: r.seed_spread().map(|(m, _, _)| m),
                 folder,
             }
         })
@@ -351,6 +453,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         "dataset": seq.summary(),
         "frames": n,
         "threads": args.threads,
+        "seeds": args.seeds,
         "model": args.model,
         "rows": json_rows,
         "feature_share": share,
@@ -397,7 +500,11 @@ pub fn ablate_outputs() -> Vec<String> {
             .into();
     for s in [Semantics::Off, Semantics::Cull, Semantics::Full, Semantics::Motion] {
         for a in [Association::Hard, Association::Em] {
-            v.push(format!("{}-{}", s.name(), association_name(a)));
+            let row = format!("{}-{}", s.name(), association_name(a));
+            for seed in 1..MAX_SEEDS {
+                v.push(format!("{row}-seed{seed}"));
+            }
+            v.push(row);
         }
     }
     v

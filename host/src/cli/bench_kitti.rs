@@ -13,7 +13,7 @@ use semloc::eval::{evaluate, EvalReport};
 use semloc::run::{association_name, Network, RunConfig, Semantics};
 use semloc_core::assoc::Association;
 
-use super::ablate::run_rows;
+use super::ablate::{median_min_max as spread, run_rows, run_rows_seeded, MAX_SEEDS};
 use super::eval::AlignArg;
 use super::run::{AssocArg, SemanticsArg};
 
@@ -60,6 +60,11 @@ pub struct BenchKittiArgs {
     /// ATE alignment (see `semloc eval --help`).
     #[arg(long, value_enum, ignore_case = true, default_value_t = AlignArg::Se3)]
     pub align: AlignArg,
+    /// Track every configuration N times, with RANSAC seeds 0 to N-1 (`semloc run
+    /// --ransac-seed`), and add a table of the ATE's median and range over them (N ≤ 16); the
+    /// main table is seed 0's. Seed K's outputs go to `XX/<semantics>-<assoc>-seedK/`.
+    #[arg(long, default_value_t = 1, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=MAX_SEEDS))]
+    pub seeds: u8,
 }
 
 /// One (sequence, system) cell group of the table.
@@ -81,6 +86,9 @@ pub struct Cell {
     pub lost: Option<u32>,
     /// Compute time per frame, median (ms).
     pub median_ms: Option<f64>,
+    /// `--seeds`: the ATE (m) of each RANSAC seed's run, seed 0 first (empty for a
+    /// reference).
+    pub ate_seeds_m: Vec<f64>,
     /// Why a figure is missing, if one is.
     pub note: Option<String>,
 }
@@ -96,6 +104,7 @@ impl Cell {
             rpe_1f_rot_deg: e.and_then(|e| e.rpe_1f.as_ref()).map(|r| r.rot_deg.rmse),
             lost: None,
             median_ms: None,
+            ate_seeds_m: Vec::new(),
             note,
         }
     }
@@ -218,6 +227,22 @@ pub fn table(rows: &[SeqRow], align: &str) -> String {
         "\nt_rel / r_rel: KITTI devkit (segments of 100..800 m; n/a on shorter paths), r_rel in \
          °/100 m; ATE: RMSE after {align} alignment."
     );
+    let seeds = rows.iter().flat_map(|r| &r.cells).map(|c| c.ate_seeds_m.len()).max();
+    if let Some(seeds @ 2..) = seeds {
+        let _ = writeln!(
+            s,
+            "\nATE [m] over RANSAC seeds 0-{} (`semloc run --ransac-seed`): median (min-max)",
+            seeds - 1
+        );
+        for r in rows {
+            let _ = write!(s, "{:<5}", r.seq);
+            for c in r.cells.iter().filter(|c| !c.ate_seeds_m.is_empty()) {
+                let (m, lo, hi) = spread(&c.ate_seeds_m);
+                let _ = write!(s, " | {:<14}{:>22}", c.system, format!("{m:.3} ({lo:.3}-{hi:.3})"));
+            }
+            s.push('\n');
+        }
+    }
     for r in rows {
         for c in &r.cells {
             if let Some(n) = &c.note {
@@ -260,7 +285,13 @@ pub fn run(args: &BenchKittiArgs) -> Result<()> {
             ..RunConfig::new(&seq, &out)
         };
         let n = base().frame_count();
-        let runs = run_rows(&base, &pairs, &out)?;
+        let mut runs = run_rows(&base, &pairs, &out)?;
+        for seed in 1..u64::from(args.seeds) {
+            let more = run_rows_seeded(&base, &pairs, &out, seed)?;
+            for (row, other) in runs.iter_mut().zip(more) {
+                row.seed_ates.extend(other.seed_ates);
+            }
+        }
         let mut cells: Vec<Cell> = runs
             .iter()
             .map(|r| {
@@ -270,6 +301,7 @@ pub fn run(args: &BenchKittiArgs) -> Result<()> {
                 let mut c = Cell::from_eval(system, r.outcome.eval.as_ref(), note);
                 c.lost = Some(r.outcome.summary.lost);
                 c.median_ms = r.outcome.summary.timing.get("compute").map(|p| p.median_ms);
+                c.ate_seeds_m = r.seed_ates.clone();
                 c
             })
             .collect();
