@@ -284,20 +284,9 @@ fn ablate_runs_every_combination_into_one_table() {
 /// others beside it, each recording its seed; the table and JSON give the ATE over seeds.
 #[test]
 fn ablate_seeds_runs_every_row_per_ransac_seed() {
+    let street = common::synth("10", "low", "5");
+    let data = street.path();
     let dir = tempfile::tempdir().unwrap();
-    let data = dir.path().join("synth");
-    let o = semloc(&[
-        "synth",
-        "--out",
-        data.to_str().unwrap(),
-        "--frames",
-        "10",
-        "--dynamics",
-        "low",
-        "--seed",
-        "5",
-    ]);
-    assert!(o.status.success(), "{:?}", text(&o));
     let out = dir.path().join("abl");
     let args = |seeds: &str| {
         [
