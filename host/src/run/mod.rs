@@ -218,6 +218,16 @@ impl MovingCheck {
     pub fn recall(&self) -> f64 {
         f64::from(self.true_pos) / f64::from(self.true_pos + self.false_neg)
     }
+    /// Precision of the "moving" verdict alone: of the features tested moving, the share on
+    /// moving objects (NaN when none was); unproven features are not counted.
+    pub fn tested_precision(&self) -> f64 {
+        f64::from(self.tested_moving_true) / f64::from(self.tested_moving)
+    }
+    /// Recall of the "moving" verdict alone: of the features on moving objects, the share
+    /// tested moving rather than left unproven or kept (NaN when none moved).
+    pub fn tested_recall(&self) -> f64 {
+        f64::from(self.tested_moving_true) / f64::from(self.true_pos + self.false_neg)
+    }
 }
 
 /// Scores the last tracked frame's features against `mask` (see [`MovingCheck`]).

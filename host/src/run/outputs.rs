@@ -205,10 +205,13 @@ pub struct MotionSummary {
     pub moving_features: u32,
     pub unproven_features: u32,
     /// Against the source's moving-object mask, when it has one (`semloc synth`'s `dynamic/`):
-    /// the summed counts, precision and recall of "removed" (moving or unproven).
+    /// the summed counts, precision and recall of "removed" (moving or unproven), and of the
+    /// "moving" verdict alone (tested moving; unproven features left out).
     pub moving_check: Option<MovingCheck>,
     pub moving_precision: Option<f64>,
     pub moving_recall: Option<f64>,
+    pub tested_moving_precision: Option<f64>,
+    pub tested_moving_recall: Option<f64>,
 }
 
 /// The evaluation figures inside `summary.json`.
@@ -336,6 +339,8 @@ fn motion_summary(frames: &[FrameRecord], stats: &TrackerStats) -> MotionSummary
         unproven_features: stats.unproven_features,
         moving_precision: check.and_then(|c| finite(c.precision())),
         moving_recall: check.and_then(|c| finite(c.recall())),
+        tested_moving_precision: check.and_then(|c| finite(c.tested_precision())),
+        tested_moving_recall: check.and_then(|c| finite(c.tested_recall())),
         moving_check: check,
     }
 }
