@@ -244,13 +244,15 @@ fn ablate_runs_every_combination_into_one_table() {
         "--out",
         out.to_str().unwrap(),
         "--semantics",
-        "off,full",
+        "off,full,motion",
         "--assoc",
         "hard,em",
     ]);
     let (stdout, err) = text(&o);
     assert!(o.status.success(), "{stdout}\n{err}");
-    for row in ["off       hard", "off       em", "full      hard", "full      em"] {
+    for row in
+        ["off       hard", "off       em", "full      hard", "full      em", "motion    hard"]
+    {
         assert!(stdout.contains(row), "row {row:?} missing:\n{stdout}");
     }
     assert!(stdout.contains("Fig. 4"), "{stdout}");
@@ -260,7 +262,7 @@ fn ablate_runs_every_combination_into_one_table() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
     let rows = v["rows"].as_array().unwrap();
-    assert_eq!(rows.len(), 4);
+    assert_eq!(rows.len(), 6);
     for r in rows {
         assert!(r["ate_rmse_m"].as_f64().is_some_and(|a| a.is_finite()), "{r}");
         assert!(r["rpe_1f_trans_rmse_m"].as_f64().is_some_and(|a| a.is_finite()), "{r}");
@@ -273,6 +275,19 @@ fn ablate_runs_every_combination_into_one_table() {
     assert!(rows[1]["em_changed_total"].as_u64().unwrap() > 0);
     assert_eq!(rows[0]["median_culled_per_frame"].as_f64(), Some(0.0));
     assert!(rows[2]["median_culled_per_frame"].as_f64().unwrap() > 0.0);
+    // Motion rows score the features they remove, and those they call moving, against the
+    // street's moving-object mask; the others have nothing to score.
+    for (k, r) in rows.iter().enumerate() {
+        for key in
+            ["moving_precision", "moving_recall", "tested_moving_precision", "tested_moving_recall"]
+        {
+            if k < 4 {
+                assert!(r[key].is_null(), "{key}: {r}");
+            } else {
+                assert!(r[key].as_f64().is_some_and(|x| (0.0..=1.0).contains(&x)), "{key}: {r}");
+            }
+        }
+    }
     // Fig. 4: semantic ORB moves features off dynamic classes onto static structure.
     let share = &v["feature_share"];
     let pct = |k: &str| share[k].as_f64().unwrap();

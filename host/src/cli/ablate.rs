@@ -124,6 +124,9 @@ struct JsonRow<'a> {
     /// sequence's moving-object mask (synthetic sequences), else null.
     moving_precision: Option<f64>,
     moving_recall: Option<f64>,
+    /// The same for the "moving" verdict alone (unproven features left out).
+    tested_moving_precision: Option<f64>,
+    tested_moving_recall: Option<f64>,
     /// `--seeds`: the ATE of each RANSAC seed's run (seed 0 first) and their median.
     ate_rmse_m_seeds: &'a [f64],
     ate_median_m: Option<f64>,
@@ -443,6 +446,18 @@ pub fn run(args: &AblateArgs) -> Result<()> {
                     .as_ref()
                     .and_then(|m| m.moving_precision),
                 moving_recall: r.outcome.summary.motion.as_ref().and_then(|m| m.moving_recall),
+                tested_moving_precision: r
+                    .outcome
+                    .summary
+                    .motion
+                    .as_ref()
+                    .and_then(|m| m.tested_moving_precision),
+                tested_moving_recall: r
+                    .outcome
+                    .summary
+                    .motion
+                    .as_ref()
+                    .and_then(|m| m.tested_moving_recall),
                 ate_rmse_m_seeds: &r.seed_ates,
                 ate_median_m: r.seed_spread().map(|(m, _, _)| m),
                 folder,
