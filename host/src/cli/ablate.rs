@@ -256,10 +256,29 @@ pub fn run_rows<'a>(
     run_rows_seeded(base, pairs, out, 0)
 }
 
+/// [`run_rows`], then the same rows again with RANSAC seeds 1 to `seeds - 1`
+/// ([`run_rows_seeded`]), each row's [`Row::seed_ates`] gathering every seed's ATE.
+pub fn run_rows_over_seeds<'a>(
+    base: &dyn Fn() -> RunConfig<'a>,
+    pairs: &[(Semantics, Association)],
+    out: &std::path::Path,
+    seeds: u8,
+) -> Result<Vec<Row>> {
+    let mut rows = run_rows(base, pairs, out)?;
+    for seed in 1..u64::from(seeds) {
+        let more = run_rows_seeded(base, pairs, out, seed)?;
+        for (row, other) in rows.iter_mut().zip(more) {
+            // A run without an evaluation (no ground truth) has no ATE to add.
+            row.seed_ates.extend(other.seed_ates);
+        }
+    }
+    Ok(rows)
+}
+
 /// As [`run_rows`] with RANSAC seed `seed` (`semloc run --ransac-seed`); seed 0 leaves
 /// `base()`'s and writes each row to `<semantics>-<assoc>/`, any other to
 /// `<semantics>-<assoc>-seed<seed>/`.
-pub fn run_rows_seeded<'a>(
+fn run_rows_seeded<'a>(
     base: &dyn Fn() -> RunConfig<'a>,
     pairs: &[(Semantics, Association)],
     out: &std::path::Path,
@@ -369,14 +388,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         .iter()
         .flat_map(|&s| args.assoc.iter().map(move |&a| (s.into(), a.into())))
         .collect();
-    let mut rows = run_rows(&base, &pairs, &args.out)?;
-    for seed in 1..u64::from(args.seeds) {
-        let more = run_rows_seeded(&base, &pairs, &args.out, seed)?;
-        for (row, other) in rows.iter_mut().zip(more) {
-            // A run without an evaluation (no ground truth) has no ATE to add.
-            row.seed_ates.extend(other.seed_ates);
-        }
-    }
+    let rows = run_rows_over_seeds(&base, &pairs, &args.out, args.seeds)?;
     let n = base().frame_count();
     let share = if labelled { Some(feature_share(&seq, args.model.as_ref(), n)?) } else { None };
 
@@ -420,6 +432,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         .map(|(r, folder)| {
             let e = r.outcome.eval.as_ref();
             let c = r.outcome.summary.timing.get("compute");
+            let motion = r.outcome.summary.motion.as_ref();
             JsonRow {
                 semantics: r.semantics.name().to_owned(),
                 association: association_name(r.assoc),
@@ -439,25 +452,10 @@ pub fn run(args: &AblateArgs) -> Result<()> {
                 lost: r.outcome.summary.lost,
                 median_culled_per_frame: r.outcome.summary.median_culled,
                 em_changed_total: r.outcome.summary.em_changed_total,
-                moving_precision: r
-                    .outcome
-                    .summary
-                    .motion
-                    .as_ref()
-                    .and_then(|m| m.moving_precision),
-                moving_recall: r.outcome.summary.motion.as_ref().and_then(|m| m.moving_recall),
-                tested_moving_precision: r
-                    .outcome
-                    .summary
-                    .motion
-                    .as_ref()
-                    .and_then(|m| m.tested_moving_precision),
-                tested_moving_recall: r
-                    .outcome
-                    .summary
-                    .motion
-                    .as_ref()
-                    .and_then(|m| m.tested_moving_recall),
+                moving_precision: motion.and_then(|m| m.moving_precision),
+                moving_recall: motion.and_then(|m| m.moving_recall),
+                tested_moving_precision: motion.and_then(|m| m.tested_moving_precision),
+                tested_moving_recall: motion.and_then(|m| m.tested_moving_recall),
                 ate_rmse_m_seeds: &r.seed_ates,
                 ate_median_m: r.seed_spread().map(|(m, _, _)| m),
                 folder,

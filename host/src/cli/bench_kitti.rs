@@ -13,7 +13,7 @@ use semloc::eval::{evaluate, EvalReport};
 use semloc::run::{association_name, Network, RunConfig, Semantics};
 use semloc_core::assoc::Association;
 
-use super::ablate::{median_min_max as spread, run_rows, run_rows_seeded, MAX_SEEDS};
+use super::ablate::{median_min_max as spread, run_rows_over_seeds, MAX_SEEDS};
 use super::eval::AlignArg;
 use super::run::{AssocArg, SemanticsArg};
 
@@ -285,13 +285,7 @@ pub fn run(args: &BenchKittiArgs) -> Result<()> {
             ..RunConfig::new(&seq, &out)
         };
         let n = base().frame_count();
-        let mut runs = run_rows(&base, &pairs, &out)?;
-        for seed in 1..u64::from(args.seeds) {
-            let more = run_rows_seeded(&base, &pairs, &out, seed)?;
-            for (row, other) in runs.iter_mut().zip(more) {
-                row.seed_ates.extend(other.seed_ates);
-            }
-        }
+        let runs = run_rows_over_seeds(&base, &pairs, &out, args.seeds)?;
         let mut cells: Vec<Cell> = runs
             .iter()
             .map(|r| {
