@@ -15,10 +15,12 @@
 //!    or human) closer than [`MotionParams::link_px`] in the image and, when both have stereo
 //!    depth, less than [`MotionParams::link_m`] apart in 3D. Connected label regions would
 //!    join a row of parked cars, and the car driving past them, into one region; a metric gap
-//!    keeps them apart. A feature without depth joins its nearest stereo neighbour (within
-//!    half the pixel distance) and never links two segments: chained through such features,
-//!    the passing car and the parked one were one object again (on synthetic `high` a third
-//!    of the wrongly removed features were parked cars joined to moving ones that way).
+//!    keeps them apart. A feature without depth never links two segments: chained through
+//!    such features, the passing car and the parked one were one object again (on synthetic
+//!    `high` a third of the wrongly removed features were parked cars joined to moving ones
+//!    that way). It joins the neighbouring segment whose depth explains its motion since the
+//!    previous frame (the depthless test, below), else its nearest stereo neighbour (within
+//!    half the pixel distance).
 //! 3. **Test against the ego-motion.** Every matched feature of a segment is a measurement of
 //!    its landmark at the solved pose: χ² at most the 95 % gate (as ORB-SLAM2's) is evidence
 //!    for "static", above it for "moving". Per feature the log-likelihood ratio
@@ -34,6 +36,17 @@
 //!    way against the 3D point where its chain of such matches began, with that point's
 //!    stereo noise added. Measuring against the chain's start, not the last frame, lets a car
 //!    creeping ahead along the line of sight add up its motion as it would against a landmark.
+//!    **Depthless features** (more than half of ORB's, and without a 3D point to start a
+//!    chain) are matched to the previous frame's depthless features of their category (ORB
+//!    distance ≤ [`DEPTHLESS_MAX_HAMMING`], ratio test) near where they would have been if
+//!    they stood still at the depth of a neighbouring segment (the nearest stereo feature of
+//!    each of up to [`MAX_HYPOTHESES`] segments within [`MotionParams::link_px`]). Each
+//!    depth is tested with its uncertainty along the epipolar line (the object's extent,
+//!    [`MotionParams::link_m`] plus 5 %); the feature joins the segment with the smallest χ²
+//!    and, if that passes the 2D gate, counts as a consistent measurement there. A failed
+//!    test is no evidence of motion (the feature may lie on another object than the ones
+//!    whose depths were tried), and motion along the epipolar line passes it, as it passes
+//!    any one-frame test.
 //! 4. **A latent "moving" variable per landmark**, accumulated over frames: each matched
 //!    landmark of the segment adds the segment's evidence to its log-odds (clamped to ±4). The
 //!    A feature matched frame to frame carries the log-odds of the feature it matched the
@@ -52,9 +65,9 @@
 //!
 //! The EM association sees the outcome through its candidates: held features have none.
 //!
-//! Memory: the tracker's `MotionScratch` is ≈ 304 KiB: per-frame arrays, and the previous
-//! and current frame's dynamic-class stereo features for the frame-to-frame test (up to
-//! [`PREV_CAPACITY`] each, ≈ 96 KiB per list). The per-landmark log-odds live in
+//! Memory: the tracker's `MotionScratch` is ≈ 320 KiB: per-frame arrays, and the previous
+//! and current frame's dynamic-class features for the frame-to-frame and depthless tests
+//! (up to [`PREV_CAPACITY`] each, stereo ones first, ≈ 104 KiB per list). The per-landmark log-odds live in
 //! [`crate::map::Landmark::moving_lo`]. No allocation, deterministic.
 
 use heapless::Vec;
@@ -193,12 +206,24 @@ struct PrevFeature {
     level: u8,
     class: u8,
     lo: f32,
+    /// Where it was seen (level-0 px); for a feature without stereo depth (after the first
+    /// [`MotionScratch::prev_stereo`]) this is all there is: `p_w` and the anchor are unset.
+    uv: [f32; 2],
 }
+
+/// Most segments a feature without stereo depth is tested against (the nearest ones).
+pub const MAX_HYPOTHESES: usize = 4;
 
 /// Largest ORB distance of a frame-to-frame match (ORB-SLAM2's `TH_LOW`): without a landmark's
 /// history a match rests on one descriptor, and on a car's repeated texture a loose match
 /// would read as motion.
 pub const TRACK_MAX_HAMMING: u32 = 50;
+
+/// Largest ORB distance of a match between depthless features of consecutive frames: the
+/// search is confined to where the neighbouring objects' depths put the feature, and at
+/// [`TRACK_MAX_HAMMING`] two thirds of them found no match (on synthetic `high`, seed 1, 19 %
+/// of such features were matched at 50 and 34 % at 80).
+pub const DEPTHLESS_MAX_HAMMING: u32 = 80;
 
 /// No current feature has claimed a previous one.
 const NO_CLAIM: u16 = u16::MAX;
@@ -250,6 +275,12 @@ pub(crate) struct MotionScratch {
     /// Per previous feature: its projection at the current pose (u, v; v < 0 off-image or
     /// behind the camera).
     prev_uv: [[f32; 2]; PREV_CAPACITY],
+    /// The previous frame's final pose (camera from world), for its depthless features.
+    prev_t_cw: Se3,
+    /// How many of [`Self::prev`] have stereo depth (they come first).
+    prev_stereo: usize,
+    /// The ratio test of this frame's matches (set by [`Self::match_previous`]).
+    nn_ratio: f32,
 }
 
 impl MotionScratch {
@@ -279,6 +310,9 @@ impl MotionScratch {
             prev_claim: [NO_CLAIM; PREV_CAPACITY],
             prev_dist: [0; PREV_CAPACITY],
             prev_uv: [[0.0; 2]; PREV_CAPACITY],
+            prev_t_cw: Se3::IDENTITY,
+            prev_stereo: 0,
+            nn_ratio: 0.8,
         }
     }
 
@@ -297,11 +331,13 @@ impl MotionScratch {
     /// Forgets the previous frame (a lost frame, a new map).
     pub fn forget_previous(&mut self) {
         self.prev.clear();
+        self.prev_stereo = 0;
     }
 
     /// Remembers this frame's dynamic-class stereo features (nearer than `far_m`) at its
     /// final pose `t_wc`, with the log-odds [`Self::decide`] gave them, for the next frame's
-    /// frame-to-frame test (the first [`PREV_CAPACITY`] in frame order).
+    /// frame-to-frame test, then its dynamic-class features without stereo depth (image
+    /// position, with the pose) for the depthless test; the first [`PREV_CAPACITY`] in all.
     pub fn remember(&mut self, feats: &[Feature], cam: &StereoCamera, t_wc: &Se3, far_m: f32) {
         self.next.clear();
         for (i, f) in feats.iter().enumerate() {
@@ -325,12 +361,37 @@ impl MotionScratch {
                 level: f.level,
                 class: f.class,
                 lo: self.lo_out[i],
+                uv: [f.x, f.y],
+            };
+            if self.next.push(p).is_err() {
+                break;
+            }
+        }
+        let stereo = self.next.len();
+        // Then the features without stereo depth: the next frame tests them against the depth
+        // of the objects around them.
+        for (i, f) in feats.iter().enumerate() {
+            if !is_dynamic(f.class) || f.is_stereo() {
+                continue;
+            }
+            let p = PrevFeature {
+                p_w: Vector3::zeros(),
+                anchor_w: Vector3::zeros(),
+                anchor_depth: 0.0,
+                anchor_level: f.level,
+                desc: f.desc,
+                level: f.level,
+                class: f.class,
+                lo: self.lo_out[i],
+                uv: [f.x, f.y],
             };
             if self.next.push(p).is_err() {
                 break;
             }
         }
         core::mem::swap(&mut self.prev, &mut self.next);
+        self.prev_stereo = stereo;
+        self.prev_t_cw = t_wc.inverse();
     }
 
     /// The frame-to-frame test: each dynamic-class feature without a landmark match is
@@ -354,10 +415,14 @@ impl MotionScratch {
         max_hamming: u32,
         nn_ratio: f32,
     ) -> u32 {
+        self.nn_ratio = nn_ratio;
         if params.track_px <= 0.0 || self.prev.is_empty() {
             return 0;
         }
-        let m = self.prev.len();
+        let m = self.prev_stereo;
+        if m == 0 {
+            return 0;
+        }
         for j in 0..m {
             self.prev_claim[j] = NO_CLAIM;
             let pc = t_cw.transform_point(&self.prev[j].p_w);
@@ -442,12 +507,20 @@ impl MotionScratch {
     /// documentation); afterwards [`Self::root`] names each feature's segment.
     ///
     /// Stereo features link to each other by image and metric distance. A feature without
-    /// depth joins the segment of its nearest stereo neighbour (same category, within half of
-    /// [`MotionParams::link_px`]) and never links two segments: in traffic a monocular feature
+    /// depth joins the neighbouring segment whose depth explains its motion since the
+    /// previous frame at the solved pose `t_cw` (the depthless test), else the segment of its
+    /// nearest stereo neighbour (same category, within half of [`MotionParams::link_px`]),
+    /// and never links two segments: in traffic a monocular feature
     /// on the border between a car driving past and the parked car behind it would otherwise
     /// chain the two into one object. Features without depth and without a stereo neighbour
     /// link among themselves.
-    pub fn segment(&mut self, feats: &[Feature], cam: &StereoCamera, params: &MotionParams) -> u32 {
+    pub fn segment(
+        &mut self,
+        feats: &[Feature],
+        cam: &StereoCamera,
+        t_cw: &Se3,
+        params: &MotionParams,
+    ) -> u32 {
         let (fx, fy) = (cam.fx_px as f32, cam.fy_px as f32);
         self.dyn_idx.clear();
         for (i, f) in feats.iter().enumerate() {
@@ -486,14 +559,20 @@ impl MotionScratch {
                 }
             }
         }
-        // A monocular feature joins its nearest stereo neighbour (ties: the lower index); the
-        // unattached ones are marked for the last passes.
+        // A monocular feature joins the neighbouring object whose depth explains its motion
+        // since the previous frame, if one does; else its nearest stereo neighbour (ties: the
+        // lower index). The unattached ones are marked for the last passes.
         let half = 0.5 * params.link_px;
+        let t_prev_cur = self.prev_t_cw.compose(&t_cw.inverse());
         for a in 0..n {
             let ia = usize::from(self.dyn_idx[a]);
             let fa = feats[ia];
             self.unattached[ia] = false;
             if fa.is_stereo() {
+                continue;
+            }
+            if let Some(ib) = self.test_depthless(ia, feats, cam, &t_prev_cur, params) {
+                self.union(ia, ib);
                 continue;
             }
             let mut best: Option<(f32, usize)> = None;
@@ -568,6 +647,133 @@ impl MotionScratch {
         segments
     }
 
+    /// The depthless test: feature `ia` (dynamic class, no stereo depth, not measured) is
+    /// matched to the previous frame's depthless features of its category and tested, for
+    /// each neighbouring segment (the nearest stereo feature of each, within
+    /// [`MotionParams::link_px`]), against the ego-motion as if it stood still at that
+    /// feature's depth, give or take the object's extent ([`MotionParams::link_m`] plus 5 %).
+    /// Returns the stereo feature of the best segment if that test passes its χ² gate.
+    fn test_depthless(
+        &mut self,
+        ia: usize,
+        feats: &[Feature],
+        cam: &StereoCamera,
+        t_prev_cur: &Se3,
+        params: &MotionParams,
+    ) -> Option<usize> {
+        if params.track_px <= 0.0 || self.prev.len() == self.prev_stereo || self.measured(ia) {
+            return None;
+        }
+        let fa = feats[ia];
+        let cat = category(fa.class);
+        // The nearest stereo feature of each neighbouring segment.
+        let mut hyp: Vec<(f32, usize, usize), MAX_HYPOTHESES> = Vec::new();
+        for k in 0..self.dyn_idx.len() {
+            let ib = usize::from(self.dyn_idx[k]);
+            let fb = feats[ib];
+            if !fb.is_stereo()
+                || category(fb.class) != cat
+                || (fa.x - fb.x).abs() > params.link_px
+                || (fa.y - fb.y).abs() > params.link_px
+            {
+                continue;
+            }
+            let d = (fa.x - fb.x) * (fa.x - fb.x) + (fa.y - fb.y) * (fa.y - fb.y);
+            let r = self.find(ib);
+            if let Some(h) = hyp.iter_mut().find(|h| h.2 == r) {
+                if d < h.0 {
+                    *h = (d, ib, r);
+                }
+            } else if hyp.push((d, ib, r)).is_err() {
+                // Full: replace the farthest if this one is nearer.
+                let (w, _) = hyp.iter().enumerate().fold((0, f32::MIN), |acc, (k, h)| {
+                    if h.0 > acc.1 {
+                        (k, h.0)
+                    } else {
+                        acc
+                    }
+                });
+                if d < hyp[w].0 {
+                    hyp[w] = (d, ib, r);
+                }
+            }
+        }
+        if hyp.is_empty() {
+            return None;
+        }
+        // Per hypothesis: where the feature was in the previous frame if it stood still at
+        // that depth, and how that moves over the object's depth extent.
+        let mut pred: [([f64; 2], [f64; 2]); MAX_HYPOTHESES] =
+            [([0.0; 2], [0.0; 2]); MAX_HYPOTHESES];
+        let (u, v) = (f64::from(fa.x), f64::from(fa.y));
+        let mut ok = [false; MAX_HYPOTHESES];
+        for (k, h) in hyp.iter().enumerate() {
+            let z = f64::from(feats[h.1].depth_m);
+            let dz = (f64::from(params.link_m) + 0.05 * z).min(0.5 * z);
+            let at = |z: f64| cam.project(&t_prev_cur.transform_point(&cam.backproject(u, v, z)));
+            if let (Some(c), Some(n), Some(f)) = (at(z), at(z - dz), at(z + dz)) {
+                pred[k] = ([c.x, c.y], [0.5 * (f.x - n.x), 0.5 * (f.y - n.y)]);
+                ok[k] = true;
+            }
+        }
+        let r = params.track_px * level_scale(fa.level);
+        let (mut best, mut second, mut best_j) = (u32::MAX, u32::MAX, usize::MAX);
+        for j in self.prev_stereo..self.prev.len() {
+            let p = &self.prev[j];
+            if p.level.abs_diff(fa.level) > 1 || category(p.class) != cat {
+                continue;
+            }
+            let near = (0..hyp.len()).any(|k| {
+                ok[k]
+                    && (f64::from(p.uv[0]) - pred[k].0[0]).abs() <= f64::from(r)
+                    && (f64::from(p.uv[1]) - pred[k].0[1]).abs() <= f64::from(r)
+            });
+            if !near {
+                continue;
+            }
+            let d = hamming(&p.desc, &fa.desc);
+            if d < best {
+                (second, best, best_j) = (best, d, j);
+            } else if d < second {
+                second = d;
+            }
+        }
+        if best > DEPTHLESS_MAX_HAMMING
+            || (second != u32::MAX && best as f32 >= self.nn_ratio * second as f32)
+        {
+            return None;
+        }
+        let p = self.prev[best_j];
+        let s2 = 1.0 / level_inv_sigma2(fa.level) + 1.0 / level_inv_sigma2(p.level);
+        let mut win: Option<(f64, usize)> = None;
+        for k in 0..hyp.len() {
+            if !ok[k] {
+                continue;
+            }
+            let (c, d) = pred[k];
+            let (rx, ry) = (f64::from(p.uv[0]) - c[0], f64::from(p.uv[1]) - c[1]);
+            // Σ = s2 I + d dᵀ
+            let (a, b, cc) = (s2 + d[0] * d[0], d[0] * d[1], s2 + d[1] * d[1]);
+            let det = a * cc - b * b;
+            let chi = (cc * rx * rx - 2.0 * b * rx * ry + a * ry * ry) / det;
+            if win.is_none_or(|(w, _)| chi < w) {
+                win = Some((chi, k));
+            }
+        }
+        let (chi, k) = win?;
+        let gate = crate::optim::CHI2_MONO;
+        let consistent = chi <= gate;
+        if !consistent {
+            // Not evidence of motion: the feature may lie on another object than the
+            // neighbours whose depths were tried.
+            return None;
+        }
+        self.prev_lo[ia] = p.lo;
+        self.chi2[ia] = chi as f32;
+        self.gate[ia] = gate as f32;
+        Some(hyp[k].1)
+    }
+
     /// Joins the segments of `a` and `b`; the smaller root index stays the root
     /// (deterministic whatever the link order).
     fn union(&mut self, a: usize, b: usize) {
@@ -602,10 +808,11 @@ impl MotionScratch {
         &mut self,
         feats: &[Feature],
         cam: &StereoCamera,
+        t_cw: &Se3,
         params: &MotionParams,
         mut update: impl FnMut(u32, f32) -> f32,
     ) -> MotionReport {
-        let segments = self.segment(feats, cam, params);
+        let segments = self.segment(feats, cam, t_cw, params);
         let mut rep = MotionReport { segments, ..Default::default() };
         let n = self.dyn_idx.len();
         for k in 0..n {
@@ -726,7 +933,7 @@ mod tests {
             feat(110.0, 100.0, 10.0, 1), // building: not dynamic
         ];
         s.reset(feats.len());
-        assert_eq!(s.segment(&feats, &crate::testing::kitti_cam(), &p), 4);
+        assert_eq!(s.segment(&feats, &crate::testing::kitti_cam(), &Se3::IDENTITY, &p), 4);
         assert_eq!(s.root(1), 0);
         assert_eq!(s.root(2), 0);
         assert_eq!(s.root(3), 3);
@@ -753,7 +960,7 @@ mod tests {
             feat(400.0, 100.0, 0.0, 8),  // no depth, alone
         ];
         s.reset(feats.len());
-        assert_eq!(s.segment(&feats, &crate::testing::kitti_cam(), &p), 3);
+        assert_eq!(s.segment(&feats, &crate::testing::kitti_cam(), &Se3::IDENTITY, &p), 3);
         assert_eq!(s.root(1), 0);
         assert_eq!(s.root(3), 2);
         assert_eq!(s.root(4), 2, "joins the nearer (parked) car only");
@@ -787,7 +994,7 @@ mod tests {
                 s.gate[i] = 7.8;
                 s.chi2[i] = if i < 5 { 1.0 } else { 60.0 };
             }
-            s.decide(&feats, &crate::testing::kitti_cam(), &p, |id, e| {
+            s.decide(&feats, &crate::testing::kitti_cam(), &Se3::IDENTITY, &p, |id, e| {
                 let l = &mut lo[id as usize];
                 *l = (*l + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
                 *l
@@ -828,7 +1035,7 @@ mod tests {
             s.gate[i] = 7.8;
             s.chi2[i] = 1.0;
         }
-        let rep = s.decide(&feats, &crate::testing::kitti_cam(), &p, |_, _| -2.67);
+        let rep = s.decide(&feats, &crate::testing::kitti_cam(), &Se3::IDENTITY, &p, |_, _| -2.67);
         assert_eq!(rep.parked_segments, 0);
         assert_eq!(rep.unproven_features, 8);
         s.reset(feats.len());
@@ -837,7 +1044,7 @@ mod tests {
             s.gate[i] = 7.8;
             s.chi2[i] = if i == 3 { 50.0 } else { 1.0 };
         }
-        let rep = s.decide(&feats, &crate::testing::kitti_cam(), &p, |_, _| -6.0);
+        let rep = s.decide(&feats, &crate::testing::kitti_cam(), &Se3::IDENTITY, &p, |_, _| -6.0);
         assert_eq!(rep.parked_segments, 1);
         assert_eq!(rep.parked_features, 8);
     }
@@ -877,7 +1084,7 @@ mod tests {
         let far = 40.0 * cam.baseline_m as f32;
         s.reset(feats.len());
         let measured = s.match_previous(feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
-        s.decide(feats, &cam, &p, |_, _| unreachable!("no landmarks"));
+        s.decide(feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
         s.remember(feats, &cam, &driving(t).inverse(), far);
         measured
     }
@@ -970,5 +1177,57 @@ mod tests {
         assert!(states.windows(2).skip(1).all(|w| w[1].1 > w[0].1), "{states:?}");
         assert!(states[3..].iter().all(|&(m, c)| m != FeatureMotion::Parked && c > 7.8));
         assert_eq!(states[5].0, FeatureMotion::Moving, "{states:?}");
+    }
+    /// A parked car's feature without stereo depth, closer in the image to a car driving
+    /// alongside than to the parked car's own stereo features, joins the parked car: its
+    /// motion since the previous frame is what the ego-motion gives at the parked car's
+    /// depth, not at the other car's. Without the previous frame it joins its nearest stereo
+    /// neighbour, the wrong car.
+    #[test]
+    fn a_depthless_feature_joins_the_object_whose_depth_explains_its_motion() {
+        let cam = crate::testing::kitti_cam();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        // Parked car 12 m ahead on the right (stereo features), one of its points without
+        // stereo depth 0.45 m further out.
+        let parked: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(3.0 + 0.15 * f64::from(k), 0.8 + 0.05 * f64::from(k % 2), 12.0))
+            .collect();
+        let lone = Vector3::new(3.9, 0.8, 12.0);
+        let frame = |t: usize| -> std::vec::Vec<Feature> {
+            let mut f: std::vec::Vec<Feature> = parked
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| seen(&cam, &driving(t), q, 8, k as u8))
+                .collect();
+            let mut d = seen(&cam, &driving(t), lone, 8, 50);
+            (d.ur, d.depth_m) = (-1.0, -1.0);
+            // A car driving alongside at 8 m, always 8-14 px to the right of that point in
+            // the image (stereo features).
+            for k in 0..3 {
+                let pc =
+                    cam.backproject(f64::from(d.x) + 8.0 + 3.0 * k as f64, f64::from(d.y), 8.0);
+                f.push(seen(
+                    &cam,
+                    &driving(t),
+                    driving(t).inverse().transform_point(&pc),
+                    8,
+                    200 + k,
+                ));
+            }
+            f.push(d);
+            f
+        };
+        let lone_idx = parked.len() + 3;
+        let mut roots = std::vec::Vec::new();
+        for t in 0..3 {
+            let feats = frame(t);
+            landmarkless_frame(&mut s, &feats, t);
+            roots.push((s.root(lone_idx), s.state[lone_idx], s.state[0]));
+        }
+        use FeatureMotion::*;
+        assert_eq!(roots[0].0, parked.len(), "first frame: the nearest stereo neighbour");
+        assert_eq!(roots[1].0, 0, "{roots:?}");
+        assert_eq!(roots[2], (0, Parked, Parked), "{roots:?}");
+        assert!(s.consistent(lone_idx), "measured, and consistent, at the parked car's depth");
     }
 }

@@ -794,11 +794,12 @@ impl Tracker {
             self.params.max_hamming.min(crate::motion::TRACK_MAX_HAMMING),
             self.params.nn_ratio,
         );
-        let report = self.motion.decide(feats, &self.cam, &self.params.motion, |id, e| {
-            let l = window.lm_mut(id);
-            l.moving_lo = (l.moving_lo + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
-            l.moving_lo
-        });
+        let report =
+            self.motion.decide(feats, &self.cam, &self.t_cw, &self.params.motion, |id, e| {
+                let l = window.lm_mut(id);
+                l.moving_lo = (l.moving_lo + e).clamp(-MAX_LANDMARK_LOGIT, MAX_LANDMARK_LOGIT);
+                l.moving_lo
+            });
         let mut relinked = 0;
         for i in 0..feats.len() {
             match self.motion.state[i] {
