@@ -225,6 +225,32 @@ pub const TRACK_MAX_HAMMING: u32 = 50;
 /// of such features were matched at 50 and 34 % at 80).
 pub const DEPTHLESS_MAX_HAMMING: u32 = 80;
 
+/// The two smallest ORB distances offered, and where the smallest came from.
+#[derive(Clone, Copy)]
+struct Nearest2 {
+    best: u32,
+    second: u32,
+    at: usize,
+}
+
+impl Nearest2 {
+    const NONE: Self = Self { best: u32::MAX, second: u32::MAX, at: usize::MAX };
+
+    fn offer(&mut self, d: u32, j: usize) {
+        if d < self.best {
+            (self.second, self.best, self.at) = (self.best, d, j);
+        } else if d < self.second {
+            self.second = d;
+        }
+    }
+
+    /// Whether the best is within `max` and below `ratio` of the second best (if any).
+    fn passes(&self, max: u32, ratio: f32) -> bool {
+        self.best <= max
+            && (self.second == u32::MAX || (self.best as f32) < ratio * self.second as f32)
+    }
+}
+
 /// No current feature has claimed a previous one.
 const NO_CLAIM: u16 = u16::MAX;
 
@@ -437,7 +463,7 @@ impl MotionScratch {
             }
             let r = params.track_px * level_scale(f.level);
             let cat = category(f.class);
-            let (mut best, mut second, mut best_j) = (u32::MAX, u32::MAX, usize::MAX);
+            let mut near = Nearest2::NONE;
             for j in 0..m {
                 let [u, v] = self.prev_uv[j];
                 let p = &self.prev[j];
@@ -449,17 +475,12 @@ impl MotionScratch {
                 {
                     continue;
                 }
-                let d = hamming(&p.desc, &f.desc);
-                if d < best {
-                    (second, best, best_j) = (best, d, j);
-                } else if d < second {
-                    second = d;
-                }
+                near.offer(hamming(&p.desc, &f.desc), j);
             }
-            if best > max_hamming || (second != u32::MAX && best as f32 >= nn_ratio * second as f32)
-            {
+            if !near.passes(max_hamming, nn_ratio) {
                 continue;
             }
+            let (best, best_j) = (near.best, near.at);
             // One feature per previous feature: the nearest in ORB distance (ties: the first).
             let c = self.prev_claim[best_j];
             if c == NO_CLAIM || best < u32::from(self.prev_dist[best_j]) {
@@ -717,7 +738,7 @@ impl MotionScratch {
             }
         }
         let r = params.track_px * level_scale(fa.level);
-        let (mut best, mut second, mut best_j) = (u32::MAX, u32::MAX, usize::MAX);
+        let mut nearest = Nearest2::NONE;
         for j in self.prev_stereo..self.prev.len() {
             let p = &self.prev[j];
             if p.level.abs_diff(fa.level) > 1 || category(p.class) != cat {
@@ -731,19 +752,12 @@ impl MotionScratch {
             if !near {
                 continue;
             }
-            let d = hamming(&p.desc, &fa.desc);
-            if d < best {
-                (second, best, best_j) = (best, d, j);
-            } else if d < second {
-                second = d;
-            }
+            nearest.offer(hamming(&p.desc, &fa.desc), j);
         }
-        if best > DEPTHLESS_MAX_HAMMING
-            || (second != u32::MAX && best as f32 >= self.nn_ratio * second as f32)
-        {
+        if !nearest.passes(DEPTHLESS_MAX_HAMMING, self.nn_ratio) {
             return None;
         }
-        let p = self.prev[best_j];
+        let p = self.prev[nearest.at];
         let s2 = 1.0 / level_inv_sigma2(fa.level) + 1.0 / level_inv_sigma2(p.level);
         let mut win: Option<(f64, usize)> = None;
         for k in 0..hyp.len() {
