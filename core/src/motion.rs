@@ -442,11 +442,8 @@ impl MotionScratch {
         nn_ratio: f32,
     ) -> u32 {
         self.nn_ratio = nn_ratio;
-        if params.track_px <= 0.0 || self.prev.is_empty() {
-            return 0;
-        }
         let m = self.prev_stereo;
-        if m == 0 {
+        if params.track_px <= 0.0 || m == 0 {
             return 0;
         }
         for j in 0..m {
@@ -673,7 +670,9 @@ impl MotionScratch {
     /// each neighbouring segment (the nearest stereo feature of each, within
     /// [`MotionParams::link_px`]), against the ego-motion as if it stood still at that
     /// feature's depth, give or take the object's extent ([`MotionParams::link_m`] plus 5 %).
-    /// Returns the stereo feature of the best segment if that test passes its χ² gate.
+    /// If the best segment's test passes its χ² gate, records it as the feature's measurement
+    /// ([`Self::chi2`], [`Self::gate`], and the matched feature's log-odds) and returns that
+    /// segment's stereo feature; else changes nothing.
     fn test_depthless(
         &mut self,
         ia: usize,
@@ -1192,6 +1191,7 @@ mod tests {
         assert!(states[3..].iter().all(|&(m, c)| m != FeatureMotion::Parked && c > 7.8));
         assert_eq!(states[5].0, FeatureMotion::Moving, "{states:?}");
     }
+
     /// A parked car's feature without stereo depth, closer in the image to a car driving
     /// alongside than to the parked car's own stereo features, joins the parked car: its
     /// motion since the previous frame is what the ego-motion gives at the parked car's
