@@ -18,7 +18,9 @@ import torch
 from PIL import Image
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-DEFAULT_ROOT = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "data", "camvid"))
+# SEMLOC_CAMVID overrides it where ../shared is not beside the checkout (the lent GPU machine).
+DEFAULT_ROOT = os.environ.get("SEMLOC_CAMVID") or os.path.normpath(
+    os.path.join(HERE, "..", "..", "shared", "data", "camvid"))
 
 CLASSES = ["sky", "building", "pole", "road", "pavement", "tree", "sign-symbol", "fence", "car",
            "pedestrian", "bicyclist"]

@@ -36,6 +36,10 @@ def get_args(argv=None):
     p.add_argument("--variant", choices=["res2net", "bottleneck"], default="res2net")
     p.add_argument("--epochs", type=int, default=200)
     p.add_argument("--max-iters", type=int, default=0, help="stop after this many iterations (smoke runs)")
+    p.add_argument("--time-budget", type=float, default=0,
+                   help="seconds of training to fit the schedule into (a lent GPU's time is fixed): after "
+                   "70 iterations the poly schedule is shortened, if need be, to the iterations that fit, "
+                   "measured with data loading and evaluation; 0 = the full --epochs")
     p.add_argument("--batch", type=int, default=8)
     p.add_argument("--lr", type=float, default=None, help="default 0.045 (sgd) / 2e-3 (adamw)")
     p.add_argument("--optim", choices=["sgd", "adamw"], default="sgd")
@@ -166,6 +170,7 @@ def main(argv=None):
         print(f"resumed at epoch {start_epoch}, iteration {it}", flush=True)
     iter_times, data_times = [], []
     done = False
+    fitted = None  # (iterations the schedule was cut to, s/iter it was measured at)
     for epoch in range(start_epoch, a.epochs):
         train_ds.set_epoch(epoch)
         run_loss, n_b = 0.0, 0
@@ -192,6 +197,19 @@ def main(argv=None):
             run_loss += loss.item()
             n_b += 1
             it += 1
+            if a.time_budget and len(iter_times) == 20:
+                t_rate = time.time()  # after start-up and cuDNN's algorithm search
+            if a.time_budget and fitted is None and len(iter_times) == 70:
+                # Wall time per iteration over iterations 20-70 (data, transfers, evaluation
+                # included), with a 10 % margin for the evaluations still to come; the poly decay
+                # is re-aimed at the cut.
+                rate = 1.1 * (time.time() - t_rate) / 50
+                fit = max(it, it + int((a.time_budget - (time.time() - t_start)) / rate))
+                fitted = (min(total, fit), rate)
+                if fit < total:
+                    print(f"--time-budget {a.time_budget:.0f}s at {rate:.3f} s/iter: schedule cut from "
+                          f"{total} to {fit} iterations ({fit / iters_per_epoch:.1f} epochs)", flush=True)
+                    total = fit
             if it >= total:
                 done = True
                 break
@@ -231,6 +249,7 @@ def main(argv=None):
             "mean_s_per_iter": float(np.mean(iter_times[1:] if len(iter_times) > 1 else iter_times)),
             "mean_data_s_per_iter": float(np.mean(data_times[1:] if len(data_times) > 1 else data_times)),
             "elapsed_s": time.time() - t_start, "history": history, "best": best,
+            "scheduled_iters": total, "time_budget_fit": fitted,
         }
         with open(os.path.join(a.out, "metrics.json"), "w") as f:
             json.dump(summary, f, indent=1, default=str)
