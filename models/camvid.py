@@ -65,6 +65,30 @@ def list_sequences(root, splits, include=None, exclude=None):
     return items
 
 
+def list_synth(root, every=1):
+    """(image, label) pairs of a `semloc synth` output root: every `every`-th frame of each
+    `sequences/XX`, its left image (`image_0`, grey, or `image_2`, colour; both become luma)
+    with `semantic/` (CamVid ids, the generator's exact labels). Raises on a root without
+    any such sequence, so a mistyped path is not trained on as nothing."""
+    seq_root = os.path.join(root, "sequences")
+    items = []
+    if os.path.isdir(seq_root):
+        for seq in sorted(os.listdir(seq_root)):
+            d = os.path.join(seq_root, seq)
+            sem = os.path.join(d, "semantic")
+            img = next((os.path.join(d, c) for c in ("image_0", "image_2")
+                        if os.path.isdir(os.path.join(d, c))), None)
+            if img is None or not os.path.isdir(sem):
+                continue
+            names = sorted(f for f in os.listdir(sem) if f.endswith(".png"))
+            for n in names[::max(1, every)]:
+                if os.path.exists(os.path.join(img, n)):
+                    items.append((os.path.join(img, n), os.path.join(sem, n)))
+    if not items:
+        raise ValueError(f"{root}: no `semloc synth` sequence (sequences/XX/image_0|image_2 + semantic/)")
+    return items
+
+
 def load_luma(path):
     """u8 luma, H x W (Pillow BT.601 fixed point, as the Rust side)."""
     return np.asarray(Image.open(path).convert("L"), dtype=np.uint8)

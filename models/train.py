@@ -63,6 +63,10 @@ def get_args(argv=None):
     p.add_argument("--holdout-seq", default="",
                    help="CamVid sequence kept out of training entirely (e.g. 0006R0): train on "
                    "train+val without it, select on it, report val beside it")
+    p.add_argument("--synth", nargs="+", default=[], metavar="DIR",
+                   help="also train on `semloc synth` output roots (their exact labels): "
+                   "every --synth-every-th frame of each sequence joins the training set")
+    p.add_argument("--synth-every", type=int, default=1)
     p.add_argument("--aug", choices=["basic", "strong"], default="basic",
                    help="strong: wider exposure range, blur, more noise (KITTI-like appearance)")
     p.add_argument("--resume", default="", help="checkpoint to start from: weights, and when it holds "
@@ -112,6 +116,16 @@ def main(argv=None):
         sel_items = camvid.list_sequences(a.data, ["train", "val"], include={a.holdout_seq})
         if not sel_items:
             raise SystemExit(f"--holdout-seq {a.holdout_seq}: no such sequence in {a.data}")
+    if a.synth:
+        if train_items is None:
+            train_items = camvid.list_split(a.data, "train")
+        n_camvid = len(train_items)
+        for root in a.synth:
+            try:
+                train_items = train_items + camvid.list_synth(root, a.synth_every)
+            except ValueError as e:
+                raise SystemExit(f"--synth: {e}")
+        print(f"training set: {n_camvid} CamVid + {len(train_items) - n_camvid} synthetic frames", flush=True)
     train_ds = camvid.CamVid("train", a.data, crop=a.crop, limit=a.limit_images or None,
                              scale=tuple(a.scale), seed=a.seed, items=train_items,
                              strong=a.aug == "strong")
