@@ -117,6 +117,27 @@ fn verify_seg_scores_a_camvid_layout_and_checks_kernels() {
     assert!((0.0..=100.0).contains(&agree));
     assert!(v["int8"]["miou"].is_number() && v["f32"]["miou"].is_number());
 
+    // --sequence scores one CamVid sequence (the file-name prefix) of the split alone
+    for name in ["0006R0_f1", "0006R0_f2", "0016E5_f1"] {
+        write_image(&root.join("val").join(format!("{name}.png")), 30, 20);
+        let lab = image::GrayImage::from_fn(30, 20, |x, _| image::Luma([(x % 4) as u8 * 4]));
+        lab.save(root.join("valannot").join(format!("{name}.png"))).unwrap();
+    }
+    let seq = |q: &str| {
+        let mut a = vec!["verify-seg", "--model", s(&slm), "--onnx", s(&onnx), "--camvid"];
+        a.extend([s(&root), "--sequence", q, "--json", s(&json)]);
+        semloc(&a)
+    };
+    let o = seq("0006R0");
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["images"], 2, "the two 0006R0 images, not a, b or 0016E5");
+    let o = seq("Seq05VD");
+    assert_eq!(o.status.code(), Some(1));
+    let t = text(&o);
+    assert!(t.contains("no image of CamVid sequence Seq05VD") && t.contains("val"), "{t}");
+
     // a missing label file is named
     std::fs::remove_file(root.join("valannot").join("b.png")).unwrap();
     let o = semloc(&["verify-seg", "--model", s(&slm), "--onnx", s(&onnx), "--camvid", s(&root)]);

@@ -38,6 +38,11 @@ pub struct VerifySegArgs {
     /// CamVid split.
     #[arg(long, default_value = "val", value_name = "SPLIT")]
     pub split: String,
+    /// Only the images of this CamVid sequence (the file-name prefix before `_`, e.g.
+    /// `0006R0`): the sequence a model was trained without (`train.py --holdout-seq`), scored
+    /// on its own. It may sit in any split; name that one with --split.
+    #[arg(long, value_name = "SEQ", requires = "camvid")]
+    pub sequence: Option<String>,
     /// A KITTI sequence folder (or a folder of images): agreement only, no labels.
     #[arg(long, value_name = "SEQUENCE_DIR")]
     pub kitti: Option<PathBuf>,
@@ -94,12 +99,25 @@ struct Report {
     category_miou_drop: Option<f64>,
 }
 
+/// The CamVid sequence of an image: its file name up to the first `_` (`0006R0_f02100.png`
+/// → `0006R0`); `None` without one.
+fn camvid_sequence(p: &Path) -> Option<&str> {
+    p.file_name()?.to_str()?.split_once('_').map(|(seq, _)| seq)
+}
+
 /// Runs `semloc verify-seg`.
 pub fn run(args: &VerifySegArgs) -> Result<()> {
     let (mut images, annot) = match (&args.camvid, &args.kitti) {
         (Some(root), _) => {
             let dir = root.join(&args.split);
-            (list_images(&dir)?, Some(root.join(format!("{}annot", args.split))))
+            let mut images = list_images(&dir)?;
+            if let Some(seq) = &args.sequence {
+                images.retain(|p| camvid_sequence(p) == Some(seq.as_str()));
+                if images.is_empty() {
+                    bail!("{}: no image of CamVid sequence {seq} (`{seq}_*`)", dir.display());
+                }
+            }
+            (images, Some(root.join(format!("{}annot", args.split))))
         }
         (None, Some(k)) => (list_images(k)?, None),
         (None, None) => bail!("give --camvid DIR or --kitti SEQUENCE_DIR"),
