@@ -39,7 +39,8 @@ def get_args(argv=None):
     p.add_argument("--time-budget", type=float, default=0,
                    help="seconds of training to fit the schedule into (a lent GPU's time is fixed): after "
                    "70 iterations the poly schedule is shortened, if need be, to the iterations that fit, "
-                   "measured with data loading and evaluation; 0 = the full --epochs")
+                   "at the wall time per iteration measured over iterations 20-70 plus a 10 %% margin "
+                   "for the evaluations; 0 = the full --epochs")
     p.add_argument("--batch", type=int, default=8)
     p.add_argument("--lr", type=float, default=None, help="default 0.045 (sgd) / 2e-3 (adamw)")
     p.add_argument("--optim", choices=["sgd", "adamw"], default="sgd")
@@ -214,9 +215,9 @@ def main(argv=None):
             if a.time_budget and len(iter_times) == 20:
                 t_rate = time.time()  # after start-up and cuDNN's algorithm search
             if a.time_budget and fitted is None and len(iter_times) == 70:
-                # Wall time per iteration over iterations 20-70 (data, transfers, evaluation
-                # included), with a 10 % margin for the evaluations still to come; the poly decay
-                # is re-aimed at the cut.
+                # Wall time per iteration over iterations 20-70 (data loading and transfers
+                # included; no evaluation falls in that window at the usual --eval-every), with a
+                # 10 % margin for the evaluations to come; the poly decay is re-aimed at the cut.
                 rate = 1.1 * (time.time() - t_rate) / 50
                 fit = max(it, it + int((a.time_budget - (time.time() - t_start)) / rate))
                 fitted = (min(total, fit), rate)
