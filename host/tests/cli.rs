@@ -357,6 +357,73 @@ fn ablate_seeds_runs_every_row_per_ransac_seed() {
     assert_eq!(o.status.code(), Some(2), "{:?}", text(&o));
 }
 
+/// `--first-frames A,B` tracks every row from each start: the main table is A's, B's runs go
+/// to `first-frames/<row>-fromB/` and equal `semloc run --first-frame B`; the table and JSON
+/// give each row's ratios to the first row over the starts.
+#[test]
+fn ablate_first_frames_runs_every_row_from_each_start() {
+    let street = common::synth("10", "low", "5");
+    let data = street.path().to_str().unwrap().to_owned();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("abl");
+    let o_s = out.to_str().unwrap();
+    let base = ["ablate", &data, "--out", o_s, "--force", "--semantics", "off"];
+    let o = semloc(&[&base[..], &["--first-frames", "0,3"]].concat());
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    assert!(stdout.contains("over 2 first frames (0, 3): ratio to off/hard"), "{stdout}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    let over = v["over_first_frames"].as_array().expect("over_first_frames");
+    assert_eq!(over.len(), 2, "{v}");
+    assert_eq!(over[0]["ate_ratio_geomean"].as_f64(), Some(1.0), "the first row is the reference");
+    let em = &over[1];
+    assert_eq!((em["semantics"].as_str(), em["association"].as_str()), (Some("off"), Some("em")));
+    let ates: Vec<f64> =
+        em["ate_rmse_m"].as_array().unwrap().iter().map(|a| a.as_f64().unwrap()).collect();
+    assert_eq!(ates.len(), 2);
+    assert_eq!(Some(ates[0]), v["rows"][1]["ate_rmse_m"].as_f64(), "start 0 is the main row");
+    let base_ates: Vec<f64> =
+        over[0]["ate_rmse_m"].as_array().unwrap().iter().map(|a| a.as_f64().unwrap()).collect();
+    let geo = ((ates[0] / base_ates[0]).ln() + (ates[1] / base_ates[1]).ln()) / 2.0;
+    assert!((em["ate_ratio_geomean"].as_f64().unwrap() - geo.exp()).abs() < 1e-12, "{em}");
+    // Frame 3's run: its own folder, 7 of the 10 frames, the dataset's numbering recorded,
+    // the same trajectory as `semloc run --first-frame 3`.
+    let from3 = out.join("first-frames/off-em-from3");
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(from3.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        (s["dataset"]["first_frame"].as_u64(), s["dataset"]["frames"].as_u64()),
+        (Some(3), Some(7))
+    );
+    let single = dir.path().join("single");
+    let o = semloc(&[
+        "run",
+        &data,
+        "--out",
+        single.to_str().unwrap(),
+        "--assoc",
+        "em",
+        "--first-frame",
+        "3",
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    assert_eq!(
+        std::fs::read_to_string(single.join("trajectory.txt")).unwrap(),
+        std::fs::read_to_string(from3.join("trajectory.txt")).unwrap()
+    );
+    // A start beyond the last frame is an error naming the folder; with --seeds, a usage error.
+    let o = semloc(&[&base[..], &["--first-frames", "0,10"]].concat());
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("--first-frame 10") && err.contains("sequences"), "{err}");
+    for extra in [["--seeds", "2"], ["--first-frame", "1"]] {
+        let o = semloc(&[&base[..], &["--first-frames", "0,3"], &extra[..]].concat());
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {:?}", text(&o));
+    }
+}
+
 #[test]
 fn ablate_without_labels_names_the_missing_folder() {
     let dir = tempfile::tempdir().unwrap();

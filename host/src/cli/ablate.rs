@@ -65,6 +65,15 @@ pub struct AblateArgs {
     /// `<semantics>-<assoc>-seedK/`.
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=MAX_SEEDS))]
     pub seeds: u8,
+    /// Also track every row from each of these dataset frames (comma-separated, e.g.
+    /// `0,2,4,6,8,10`), each to the end (or `--max-frames` frames), and report per row the
+    /// geometric mean over them of its ATE and one-frame RPE relative to the first row run
+    /// from the same frame, with the worst ratio. On a clip of a few dozen frames the ATE moves
+    /// by tens of per cent with where tracking starts, more than most differences between
+    /// rows; the ratios over several starts are what tells rows apart. The main table is the
+    /// first start's; every other start's runs go to `first-frames/<row>-from<N>/`.
+    #[arg(long, value_delimiter = ',', value_name = "N,...", conflicts_with_all = ["seeds", "first_frame"])]
+    pub first_frames: Vec<usize>,
 }
 
 /// Most RANSAC seeds `--seeds` runs per row.
@@ -131,6 +140,103 @@ struct JsonRow<'a> {
     ate_rmse_m_seeds: &'a [f64],
     ate_median_m: Option<f64>,
     folder: &'a str,
+}
+
+/// One row's figures over several first frames (`--first-frames`).
+#[derive(serde::Serialize)]
+struct StartsRow {
+    semantics: String,
+    association: String,
+    /// Per first frame (the order given): ATE RMSE (m), RPE over one frame (m, deg).
+    ate_rmse_m: Vec<f64>,
+    rpe_1f_trans_rmse_m: Vec<f64>,
+    rpe_1f_rot_rmse_deg: Vec<f64>,
+    ate_median_m: f64,
+    /// Geometric mean over the first frames of the ratio to the first row from the same frame,
+    /// and the largest such ratio.
+    ate_ratio_geomean: f64,
+    ate_ratio_worst: f64,
+    rpe_1f_trans_ratio_geomean: f64,
+    rpe_1f_rot_ratio_geomean: f64,
+}
+
+/// Geometric mean of `a[i] / b[i]` and the largest ratio (NaN when a pair is not positive).
+fn ratio_stats(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let logs: Vec<f64> = a.iter().zip(b).map(|(x, y)| (x / y).ln()).collect();
+    let mean = logs.iter().sum::<f64>() / logs.len().max(1) as f64;
+    let worst = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (mean.exp(), worst.exp())
+}
+
+/// The rows' figures over the first frames of `per_start` (one row list per first frame, the
+/// rows in the same order); ratios are to the first row.
+fn starts_rows(per_start: &[&[Row]]) -> Result<Vec<StartsRow>> {
+    let n_rows = per_start.first().map_or(0, |r| r.len());
+    let mut cols: Vec<[Vec<f64>; 3]> = vec![Default::default(); n_rows];
+    for rows in per_start {
+        for (c, r) in cols.iter_mut().zip(rows.iter()) {
+            let Some(e) = r.outcome.eval.as_ref() else {
+                anyhow::bail!(
+                    "--first-frames needs ground truth over every run: {} has no evaluation",
+                    row_name(r)
+                );
+            };
+            let rpe = e.rpe_1f.as_ref();
+            c[0].push(e.ate_rmse_m);
+            c[1].push(rpe.map_or(f64::NAN, |p| p.trans_m.rmse));
+            c[2].push(rpe.map_or(f64::NAN, |p| p.rot_deg.rmse));
+        }
+    }
+    let Some(base) = cols.first().cloned() else { return Ok(Vec::new()) };
+    Ok(per_start[0]
+        .iter()
+        .zip(cols)
+        .map(|(r, [ate, rt, rr])| {
+            let (ate_g, ate_w) = ratio_stats(&ate, &base[0]);
+            StartsRow {
+                semantics: r.semantics.name().to_owned(),
+                association: association_name(r.assoc),
+                ate_median_m: median_min_max(&ate).0,
+                ate_ratio_geomean: ate_g,
+                ate_ratio_worst: ate_w,
+                rpe_1f_trans_ratio_geomean: ratio_stats(&rt, &base[1]).0,
+                rpe_1f_rot_ratio_geomean: ratio_stats(&rr, &base[2]).0,
+                ate_rmse_m: ate,
+                rpe_1f_trans_rmse_m: rt,
+                rpe_1f_rot_rmse_deg: rr,
+            }
+        })
+        .collect())
+}
+
+/// The `--first-frames` table.
+fn starts_table(rows: &[StartsRow], starts: &[usize]) -> String {
+    let mut s = String::new();
+    let base = rows.first().map_or(String::new(), |r| format!("{}/{}", r.semantics, r.association));
+    let list: Vec<String> = starts.iter().map(ToString::to_string).collect();
+    let _ = writeln!(
+        s,
+        "\nover {} first frames ({}): ratio to {base} from the same frame, geometric mean (worst)",
+        starts.len(),
+        list.join(", ")
+    );
+    let _ = writeln!(
+        s,
+        "{:<10}{:<6}{:>15}{:>20}{:>24}",
+        "semantics", "assoc", "ATE median [m]", "ATE ratio", "RPE 1f ratio (t / rot)"
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "{:<10}{:<6}{:>15.4}{:>20}{:>24}",
+            r.semantics,
+            r.association,
+            r.ate_median_m,
+            format!("{:.3} ({:.2})", r.ate_ratio_geomean, r.ate_ratio_worst),
+            format!("{:.3} / {:.3}", r.rpe_1f_trans_ratio_geomean, r.rpe_1f_rot_ratio_geomean)
+        );
+    }
+    s
 }
 
 /// Fig. 4 of the paper on this dataset: features by category, plain and semantic ORB.
@@ -289,6 +395,19 @@ fn run_rows_seeded<'a>(
     } else {
         (format!("-seed{seed}"), format!(" (RANSAC seed {seed})"))
     };
+    run_rows_named(base, pairs, out, seed, &suffix, &label)
+}
+
+/// As [`run_rows_seeded`], each row's outputs in `out/<semantics>-<assoc><suffix>/`, `label`
+/// added to the progress line.
+fn run_rows_named<'a>(
+    base: &dyn Fn() -> RunConfig<'a>,
+    pairs: &[(Semantics, Association)],
+    out: &std::path::Path,
+    seed: u64,
+    suffix: &str,
+    label: &str,
+) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     let stop = semloc::run::StopFlag::new();
     stop.register_signals().context("installing the SIGINT/SIGTERM handlers")?;
@@ -388,8 +507,29 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         .iter()
         .flat_map(|&s| args.assoc.iter().map(move |&a| (s.into(), a.into())))
         .collect();
+    // `--first-frames`: the main table is the first start's (the sequence as opened when
+    // there is none).
+    let starts: Vec<Sequence> =
+        args.first_frames.iter().map(|&f| seq.starting_at(f)).collect::<Result<_, _>>()?;
+    let main_seq = starts.first().unwrap_or(&seq);
+    let base = || RunConfig { seq: main_seq, ..base() };
     let rows = run_rows_over_seeds(&base, &pairs, &args.out, args.seeds)?;
     let n = base().frame_count();
+    let mut per_start = Vec::new();
+    for (k, s) in starts.iter().enumerate().skip(1) {
+        let dir = args.out.join("first-frames");
+        let from = || RunConfig { seq: s, ..base() };
+        let f = args.first_frames[k];
+        let more = run_rows_named(
+            &from,
+            &pairs,
+            &dir,
+            0,
+            &format!("-from{f}"),
+            &format!(" (from frame {f})"),
+        )?;
+        per_start.push(more);
+    }
     let share = if labelled { Some(feature_share(&seq, args.model.as_ref(), n)?) } else { None };
 
     let mut text = format!(
@@ -404,6 +544,15 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         }
     );
     text.push_str(&table(&rows));
+    let over_starts = if args.first_frames.len() > 1 {
+        let all: Vec<&[Row]> =
+            core::iter::once(rows.as_slice()).chain(per_start.iter().map(Vec::as_slice)).collect();
+        let r = starts_rows(&all)?;
+        text.push_str(&starts_table(&r, &args.first_frames));
+        Some(r)
+    } else {
+        None
+    };
     if let Some(s) = &share {
         let _ = write!(
             text,
@@ -470,6 +619,8 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         "model": args.model,
         "rows": json_rows,
         "feature_share": share,
+        "first_frames": args.first_frames,
+        "over_first_frames": over_starts,
     });
     let p = args.out.join("ablation.json");
     std::fs::write(&p, serde_json::to_string_pretty(&json)?)
@@ -507,10 +658,16 @@ pub fn write_overlay(
 /// Every entry `semloc ablate` (or `demo`) may write into its output folder: the tables, the
 /// overlaid top view and one `semantics-assoc` folder per possible row.
 pub fn ablate_outputs() -> Vec<String> {
-    let mut v: Vec<String> =
-        ["ablation.json", "ablation.txt", "sequence", "trajectories.svg", "trajectories.png"]
-            .map(String::from)
-            .into();
+    let mut v: Vec<String> = [
+        "ablation.json",
+        "ablation.txt",
+        "sequence",
+        "trajectories.svg",
+        "trajectories.png",
+        "first-frames",
+    ]
+    .map(String::from)
+    .into();
     for s in [Semantics::Off, Semantics::Cull, Semantics::Full, Semantics::Motion] {
         for a in [Association::Hard, Association::Em] {
             let row = format!("{}-{}", s.name(), association_name(a));

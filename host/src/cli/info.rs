@@ -26,6 +26,14 @@ pub struct DatasetArgs {
     /// grey when the folder has it, else colour.
     #[arg(long, value_enum)]
     pub pair: Option<PairArg>,
+    /// Start at the dataset's frame N (numbered from 0): the frames before it, their times and
+    /// ground-truth poses are left out, and the ground truth is re-based to start at the
+    /// identity, as the estimate does. `--max-frames` then counts from N; `frames.csv` numbers
+    /// the processed frames from 0 and `summary.json`'s `dataset.first_frame` records N. A
+    /// short clip's ATE moves by tens of per cent with where it starts: `semloc ablate
+    /// --first-frames` runs every row from several starts.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub first_frame: usize,
 }
 
 impl DatasetArgs {
@@ -43,7 +51,7 @@ impl DatasetArgs {
             (None, Some(d)) => Sequence::open_raw(&self.dataset, d, pair)?,
             (None, None) => Sequence::open_with_camera(&self.dataset, pair, camera)?,
         };
-        Ok(seq)
+        Ok(if self.first_frame == 0 { seq } else { seq.starting_at(self.first_frame)? })
     }
 }
 

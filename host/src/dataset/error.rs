@@ -195,6 +195,20 @@ pub enum DatasetError {
         /// The decoder's reason.
         msg: String,
     },
+    /// `--first-frame` asks for a frame the sequence does not have.
+    #[error(
+        "{}: --first-frame {first} is beyond the sequence's last frame ({} frames, numbered from 0)",
+        path.display(),
+        frames
+    )]
+    FirstFrameBeyondEnd {
+        /// The sequence folder.
+        path: PathBuf,
+        /// The frame asked for (the dataset's numbering).
+        first: usize,
+        /// Frames the dataset has.
+        frames: usize,
+    },
     /// A sequence folder holds no images.
     #[error("{}: no images (empty sequence)", path.display())]
     EmptySequence {

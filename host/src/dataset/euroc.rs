@@ -448,6 +448,7 @@ pub(crate) fn open(root: &Path) -> Result<Sequence, DatasetError> {
         image_size,
         notes: Vec::new(),
         remap: Some(Arc::new(remap)),
+        first_frame: 0,
     })
 }
 

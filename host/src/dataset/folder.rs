@@ -184,6 +184,7 @@ pub(crate) fn open(root: &Path, camera: Option<StereoCalib>) -> Result<Sequence,
         image_size,
         notes,
         remap: None,
+        first_frame: 0,
     })
 }
 

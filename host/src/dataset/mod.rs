@@ -165,6 +165,9 @@ pub struct Sequence {
     pub notes: Vec<String>,
     /// EuRoC: the rectification [`Sequence::load_luma`] applies to the distorted images.
     pub remap: Option<Arc<rectify::StereoRemap>>,
+    /// The dataset's frame number of this sequence's frame 0: 0 as opened, N after
+    /// [`Sequence::starting_at`]`(N)` (`--first-frame N`).
+    pub first_frame: usize,
 }
 
 /// What `semloc info` prints about a sequence.
@@ -188,6 +191,8 @@ pub struct DatasetSummary {
     pub height_px: u32,
     /// Rectified intrinsics and baseline.
     pub calib: StereoCalib,
+    /// The dataset's frame number of the first frame (`--first-frame`; 0: from the start).
+    pub first_frame: usize,
     /// Whether ground-truth poses are available.
     pub has_gt: bool,
     /// Frames the ground truth covers (from the first); fewer than `frames` when its file is
@@ -211,7 +216,17 @@ impl core::fmt::Display for DatasetSummary {
         let layout = self.layout.describe();
         let c = &self.calib;
         writeln!(f, "{layout} sequence {} ({})", self.name, self.root.display())?;
-        writeln!(f, "  frames:     {}", self.frames)?;
+        if self.first_frame == 0 {
+            writeln!(f, "  frames:     {}", self.frames)?;
+        } else {
+            writeln!(
+                f,
+                "  frames:     {} (the dataset's frames {} to {}: --first-frame)",
+                self.frames,
+                self.first_frame,
+                self.first_frame + self.frames - 1
+            )?;
+        }
         match self.layout {
             Layout::Odometry | Layout::Raw => writeln!(
                 f,
@@ -380,6 +395,42 @@ impl Sequence {
         })
     }
 
+    /// The same sequence from its frame `first` on (`--first-frame`): images, times and the
+    /// ground truth lose their first `first` entries, and the ground truth is re-based so that
+    /// its first pose is the identity, as every reader delivers it (and as the tracker starts),
+    /// so that even an unaligned comparison holds. Frame times keep their values, so TUM files
+    /// still carry the recording time. Applied twice, the offsets add up
+    /// ([`Sequence::first_frame`]).
+    ///
+    /// # Errors
+    /// [`DatasetError::FirstFrameBeyondEnd`] when `first` is not below [`Sequence::len`].
+    pub fn starting_at(&self, first: usize) -> Result<Sequence, DatasetError> {
+        if first >= self.len() {
+            return Err(DatasetError::FirstFrameBeyondEnd {
+                path: self.root.clone(),
+                first: self.first_frame + first,
+                frames: self.first_frame + self.len(),
+            });
+        }
+        let mut s = self.clone();
+        if first == 0 {
+            return Ok(s);
+        }
+        s.left.drain(..first);
+        s.right.drain(..first);
+        s.times_s.drain(..first.min(s.times_s.len()));
+        if let Some(gt) = &mut s.gt {
+            gt.drain(..first.min(gt.len()));
+            if let Some(g0) = gt.first().map(Se3::inverse) {
+                for g in gt.iter_mut() {
+                    *g = g0.compose(g);
+                }
+            }
+        }
+        s.first_frame += first;
+        Ok(s)
+    }
+
     /// Number of frames.
     pub fn len(&self) -> usize {
         self.left.len()
@@ -508,6 +559,7 @@ impl Sequence {
             width_px: self.image_size.0,
             height_px: self.image_size.1,
             calib: self.calib,
+            first_frame: self.first_frame,
             has_gt: self.gt.is_some(),
             gt_frames: self.gt.as_ref().map_or(0, Vec::len),
             gt_problem: self.gt_problem.as_ref().map(ToString::to_string),

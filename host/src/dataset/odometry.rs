@@ -126,5 +126,6 @@ pub(crate) fn open(
         image_size,
         notes: Vec::new(),
         remap: None,
+        first_frame: 0,
     })
 }

@@ -269,6 +269,7 @@ pub(crate) fn open(
         image_size,
         notes: Vec::new(),
         remap: None,
+        first_frame: 0,
     })
 }
 

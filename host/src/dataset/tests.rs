@@ -103,6 +103,37 @@ fn odometry_opens_from_root_sequence_folder_and_autodetect() {
 }
 
 #[test]
+fn starting_at_cuts_frames_times_and_rebases_the_ground_truth() {
+    let (tmp, _) = odometry_fixture(5);
+    let a = open_odo(&tmp).unwrap();
+    let b = a.starting_at(2).unwrap();
+    assert_eq!((b.len(), b.first_frame), (3, 2));
+    assert_eq!(b.left[..], a.left[2..]);
+    assert_eq!(b.right[..], a.right[2..]);
+    // Frame times keep their values (TUM files carry the recording time).
+    assert_eq!(b.times_s, a.times_s[2..].to_vec());
+    // The ground truth starts at the identity, as the estimate does; the motion is kept.
+    let gt = b.gt.as_ref().unwrap();
+    assert_eq!(gt.len(), 3);
+    assert!(gt[0].trans.norm() < 1e-12 && gt[0].rotation_angle() < 1e-12);
+    assert!((gt[2].trans.x - 2.0).abs() < 1e-12);
+    let (l, _) = b.load_luma(0).unwrap();
+    assert_eq!(l.get_pixel(0, 0)[0], 12);
+    // Offsets add up; the summary says which of the dataset's frames these are.
+    let c = b.starting_at(1).unwrap();
+    assert_eq!((c.len(), c.first_frame), (2, 3));
+    let s = c.summary();
+    assert_eq!(s.first_frame, 3);
+    assert!(s.to_string().contains("the dataset's frames 3 to 4"), "{s}");
+    assert_eq!(a.starting_at(0).unwrap().left, a.left);
+    // Beyond the last frame: an error in the dataset's numbering, naming the folder.
+    let e = b.starting_at(3).unwrap_err();
+    assert_eq!(e, DatasetError::FirstFrameBeyondEnd { path: a.root.clone(), first: 5, frames: 5 });
+    names(&e, "00");
+    assert!(e.to_string().contains("--first-frame 5"), "{e}");
+}
+
+#[test]
 fn odometry_colour_pair_and_missing_poses() {
     let (tmp, seq) = odometry_fixture(2);
     fs::remove_dir_all(seq.join("image_0")).unwrap();

@@ -662,7 +662,7 @@ pub fn run_observed(
         git_hash: provenance::GIT_HASH,
         command_line,
         dataset_path: seq.root.clone(),
-        first_frame: 0,
+        first_frame: seq.first_frame,
         frames_requested: n,
         semantics: semantics.name(),
         labels: match (semantics, &model) {
