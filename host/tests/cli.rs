@@ -413,11 +413,19 @@ fn ablate_first_frames_runs_every_row_from_each_start() {
         std::fs::read_to_string(single.join("trajectory.txt")).unwrap(),
         std::fs::read_to_string(from3.join("trajectory.txt")).unwrap()
     );
-    // A start beyond the last frame is an error naming the folder; with --seeds, a usage error.
+    // The first start is the main table's, its dataset summary and its frame count included.
+    let o = semloc(&[&base[..], &["--assoc", "hard", "--first-frames", "3,0"]].concat());
+    assert!(o.status.success(), "{:?}", text(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    assert_eq!((v["dataset"]["first_frame"].as_u64(), v["frames"].as_u64()), (Some(3), Some(7)));
+    // A start beyond the last frame is an error naming the folder, given before --force
+    // removes anything; with --seeds, a usage error.
     let o = semloc(&[&base[..], &["--first-frames", "0,10"]].concat());
     let (_, err) = text(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(err.contains("--first-frame 10") && err.contains("sequences"), "{err}");
+    assert!(out.join("ablation.json").is_file(), "the earlier outputs are kept");
     for extra in [["--seeds", "2"], ["--first-frame", "1"]] {
         let o = semloc(&[&base[..], &["--first-frames", "0,3"], &extra[..]].concat());
         assert_eq!(o.status.code(), Some(2), "{extra:?}: {:?}", text(&o));

@@ -483,7 +483,13 @@ fn feature_share(seq: &Sequence, model: Option<&PathBuf>, n: usize) -> Result<Sh
 
 /// Runs `semloc ablate`.
 pub fn run(args: &AblateArgs) -> Result<()> {
-    let seq = args.data.open()?;
+    let opened = args.data.open()?;
+    // `--first-frames`: every start is checked before the output folder is touched; the main
+    // table, the feature share and the overlay are the first start's (the sequence as opened
+    // when there is none).
+    let starts: Vec<Sequence> =
+        args.first_frames.iter().map(|&f| opened.starting_at(f)).collect::<Result<_, _>>()?;
+    let seq = starts.first().unwrap_or(&opened);
     let labelled = args.model.is_some() || seq.has_labels();
     if !labelled && args.semantics.iter().any(|&s| s != SemanticsArg::Off) {
         anyhow::bail!(
@@ -500,24 +506,18 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         threads: args.threads,
         network: args.model.clone().map(Network::File),
         align: args.align.into(),
-        ..RunConfig::new(&seq, &args.out)
+        ..RunConfig::new(seq, &args.out)
     };
     let pairs: Vec<(Semantics, Association)> = args
         .semantics
         .iter()
         .flat_map(|&s| args.assoc.iter().map(move |&a| (s.into(), a.into())))
         .collect();
-    // `--first-frames`: the main table is the first start's (the sequence as opened when
-    // there is none).
-    let starts: Vec<Sequence> =
-        args.first_frames.iter().map(|&f| seq.starting_at(f)).collect::<Result<_, _>>()?;
-    let main_seq = starts.first().unwrap_or(&seq);
-    let base = || RunConfig { seq: main_seq, ..base() };
     let rows = run_rows_over_seeds(&base, &pairs, &args.out, args.seeds)?;
     let n = base().frame_count();
     let mut per_start = Vec::new();
+    let dir = args.out.join("first-frames");
     for (k, s) in starts.iter().enumerate().skip(1) {
-        let dir = args.out.join("first-frames");
         let from = || RunConfig { seq: s, ..base() };
         let f = args.first_frames[k];
         let more = run_rows_named(
@@ -530,7 +530,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         )?;
         per_start.push(more);
     }
-    let share = if labelled { Some(feature_share(&seq, args.model.as_ref(), n)?) } else { None };
+    let share = if labelled { Some(feature_share(seq, args.model.as_ref(), n)?) } else { None };
 
     let mut text = format!(
         "{} frames of {} ({} thread(s)); labels: {}\n\n",
@@ -569,7 +569,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         );
     }
     print!("{text}");
-    for p in write_overlay(&args.out, &seq, &rows, n)? {
+    for p in write_overlay(&args.out, seq, &rows, n)? {
         println!("wrote {}", p.display());
     }
     let p = args.out.join("ablation.txt");
