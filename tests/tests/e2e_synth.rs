@@ -39,7 +39,17 @@ fn generated(dir: &std::path::Path, dynamics: Dynamics) -> Sequence {
 
 /// The drive of generator seed `seed` (another street with other traffic).
 fn generated_street(dir: &std::path::Path, dynamics: Dynamics, seed: u64) -> Sequence {
-    let cfg = SynthConfig { frames: FRAMES, dynamics, seed, ..SynthConfig::default() };
+    generated_frames(dir, dynamics, seed, FRAMES)
+}
+
+/// The first `frames` frames of the drive of generator seed `seed`.
+fn generated_frames(
+    dir: &std::path::Path,
+    dynamics: Dynamics,
+    seed: u64,
+    frames: usize,
+) -> Sequence {
+    let cfg = SynthConfig { frames, dynamics, seed, ..SynthConfig::default() };
     generate(dir, &cfg).expect("generate");
     Sequence::open_odometry(dir, &cfg.seq, None).expect("open generated sequence")
 }
@@ -206,13 +216,7 @@ fn motion_aware_semantics_find_the_moving_traffic() {
 #[test]
 fn motion_aware_semantics_start_beside_a_truck_that_fills_the_frame() {
     let dir = tempfile::tempdir().unwrap();
-    let cfg =
-        SynthConfig { frames: 100, dynamics: Dynamics::High, seed: 1, ..SynthConfig::default() };
-    generate(dir.path(), &cfg).expect("generate");
-    let seq = Sequence::open_odometry(dir.path(), &cfg.seq, None)
-        .expect("open generated sequence")
-        .starting_at(40)
-        .unwrap();
+    let seq = generated_frames(dir.path(), Dynamics::High, 1, 100).starting_at(40).unwrap();
     let (motion, len, lost) = track(&seq, Semantics::Motion);
     eprintln!("high, seed 1, from frame 40: motion-aware {motion:.3} m over {len:.1} m");
     assert!(motion < 0.2, "motion-aware from frame 40: {motion:.3} m over {len:.1} m");
@@ -228,13 +232,7 @@ fn motion_aware_semantics_start_beside_a_truck_that_fills_the_frame() {
 #[test]
 fn motion_aware_em_starts_where_the_facades_repeat() {
     let dir = tempfile::tempdir().unwrap();
-    let cfg =
-        SynthConfig { frames: 100, dynamics: Dynamics::High, seed: 4, ..SynthConfig::default() };
-    generate(dir.path(), &cfg).expect("generate");
-    let seq = Sequence::open_odometry(dir.path(), &cfg.seq, None)
-        .expect("open generated sequence")
-        .starting_at(40)
-        .unwrap();
+    let seq = generated_frames(dir.path(), Dynamics::High, 4, 100).starting_at(40).unwrap();
     let (motion, len, lost, _) = track_full(&seq, Semantics::Motion, Association::Em);
     eprintln!("high, seed 4, from frame 40: motion + EM {motion:.3} m over {len:.1} m");
     assert!(motion < 0.2, "motion + EM from frame 40: {motion:.3} m over {len:.1} m");
