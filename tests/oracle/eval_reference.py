@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference figures for semloc's trajectory evaluator (tests/tests/eval_reference.rs).
+"""Reference figures for semloc's trajectory evaluator (tests/tests/system/eval_reference.rs).
 
 For each KITTI odometry sequence 00..10 this prints, for the published ORB-SLAM2 stereo run
 (shared/data/trajectories/orbslam2-stereo/XX.txt) against the KITTI ground truth

@@ -1,4 +1,4 @@
-//! Shared helpers for semloc's end-to-end tests (the tests themselves live in `tests/tests/`).
+//! Shared helpers for semloc's end-to-end tests (the tests themselves live in `tests/tests/`; most are modules of `tests/tests/system/`).
 #![forbid(unsafe_code)]
 use std::path::PathBuf;
 

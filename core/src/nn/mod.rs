@@ -103,7 +103,7 @@ mod testutil;
 pub mod x86;
 
 /// The x86 instruction-set cap ([`x86::set_max_isa`], [`x86::Isa`]) under its former path, for
-/// the callers that name it (`tests/tests/segmentation.rs`).
+/// the callers that name it (`tests/tests/system/segmentation.rs`).
 #[cfg(target_arch = "x86_64")]
 pub use x86 as simd;
 

@@ -1,11 +1,9 @@
 //! The segmentation subcommands end to end on a tiny synthetic network (no outside data):
 //! `convert`, `segment`, `verify-seg`, and their errors naming the file.
 
-mod common;
-
 use std::path::Path;
 
-use common::{s, semloc, text};
+use crate::common::{s, semloc, text};
 use semloc::nn::fixtures::write_tiny;
 
 /// A smooth grey test image with some structure.

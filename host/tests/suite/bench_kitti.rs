@@ -1,9 +1,7 @@
 //! `semloc bench-kitti ROOT`: every sequence of an odometry root in one table, beside a
 //! reference system's trajectories.
 
-mod common;
-
-use common::{s, semloc, text};
+use crate::common::{s, semloc, text};
 
 #[test]
 fn every_sequence_in_one_table_with_a_reference() {

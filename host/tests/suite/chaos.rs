@@ -12,9 +12,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::Instant;
 
-mod common;
-
-use common::{s, semloc, streams as text};
+use crate::common::{s, semloc, streams as text};
 
 const FRAMES: usize = 14;
 
@@ -32,7 +30,7 @@ fn run_synth(out: &str, extra: &[&str]) -> Output {
 /// The shared synthetic sequence: `ROOT/sequences/00`, `ROOT/poses/00.txt`.
 fn synth_root() -> &'static Path {
     static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
-    ROOT.get_or_init(|| common::synth(&FRAMES.to_string(), "static", "3")).path()
+    ROOT.get_or_init(|| crate::common::synth(&FRAMES.to_string(), "static", "3")).path()
 }
 
 /// A copy of the shared sequence under `dir` (images linked, text files copied) whose frame

@@ -1,10 +1,8 @@
 //! `semloc run --export-map`: the PLY point cloud of the map, on a small synthetic street.
 
-mod common;
-
 use std::path::Path;
 
-use common::{run_parked, s, text};
+use crate::common::{run_parked, s, text};
 
 /// A parsed PLY vertex: x, y, z (m), class, observations.
 struct Vertex {

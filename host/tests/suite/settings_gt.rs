@@ -1,12 +1,10 @@
 //! The settings file (`semloc config`, `run --config`, `run --orbslam2-settings`) and
 //! `semloc gt`, through the binary, on a small synthetic sequence.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use common::{s, semloc, synth, text};
+use crate::common::{s, semloc, synth, text};
 
 /// `ROOT/sequences/00` (8 frames, static street) and `ROOT/poses/00.txt`, written once.
 fn synth_root() -> &'static Path {

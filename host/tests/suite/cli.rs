@@ -2,9 +2,7 @@
 
 use std::path::Path;
 
-mod common;
-
-use common::{semloc, streams as text};
+use crate::common::{semloc, streams as text};
 
 /// A straight 200 m drive (KITTI pose lines), optionally with a scale error on x/z.
 fn write_drive(path: &Path, n: usize, scale: f64) {
@@ -299,7 +297,7 @@ fn ablate_runs_every_combination_into_one_table() {
 /// others beside it, each recording its seed; the table and JSON give the ATE over seeds.
 #[test]
 fn ablate_seeds_runs_every_row_per_ransac_seed() {
-    let street = common::synth("10", "low", "5");
+    let street = crate::common::synth("10", "low", "5");
     let data = street.path();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("abl");
@@ -362,7 +360,7 @@ fn ablate_seeds_runs_every_row_per_ransac_seed() {
 /// give each row's ratios to the first row over the starts.
 #[test]
 fn ablate_first_frames_runs_every_row_from_each_start() {
-    let street = common::synth("10", "low", "5");
+    let street = crate::common::synth("10", "low", "5");
     let data = street.path().to_str().unwrap().to_owned();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("abl");

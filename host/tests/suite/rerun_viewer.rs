@@ -2,12 +2,10 @@
 //! checked against the run's `frames.csv`.
 #![cfg(feature = "rerun")]
 
-mod common;
-
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use common::{run_parked, s, semloc, text};
+use crate::common::{run_parked, s, semloc, text};
 use rerun::components::{ClassId, Color, Position2D, Position3D};
 use rerun::log::{Chunk, LogMsg};
 
@@ -171,7 +169,7 @@ fn a_missing_folder_is_refused_before_the_run() {
 #[test]
 fn an_interrupted_run_leaves_a_whole_recording_of_its_frames() {
     use std::process::{Command, Stdio};
-    let data = common::synth("40", "static", "5");
+    let data = crate::common::synth("40", "static", "5");
     let dir = tempfile::tempdir().unwrap();
     let (out, rrd) = (dir.path().join("out"), dir.path().join("run.rrd"));
     let mut child = Command::new(env!("CARGO_BIN_EXE_semloc"))

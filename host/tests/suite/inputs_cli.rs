@@ -2,13 +2,11 @@
 //! EuRoC MAV sequence, built from one synthetic KITTI-layout sequence (`semloc synth`): the
 //! same images and camera in each layout must give the same answers.
 
-mod common;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use common::{s, semloc, synth, text};
+use crate::common::{s, semloc, synth, text};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
 
 /// `ROOT/sequences/00` (8 frames, static street) and `ROOT/poses/00.txt`, written once.

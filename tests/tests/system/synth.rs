@@ -254,7 +254,7 @@ fn right_image_matches_left_at_the_disparity_of_the_true_depth() {
 }
 
 /// ORB features and stereo matches per frame: synthetic (static and high) vs a real KITTI frame.
-/// `cargo test --release -p semloc-tests --test synth -- --ignored --nocapture`
+/// `cargo test --release -p semloc-tests --test system synth:: -- --ignored --nocapture`
 #[test]
 #[ignore = "measurement; needs ../shared/data/kitti-raw"]
 fn orb_and_stereo_statistics_vs_kitti() {

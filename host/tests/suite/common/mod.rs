@@ -1,6 +1,6 @@
 //! Helpers shared by the CLI tests: run the `semloc` binary, read its output, make a small
-//! synthetic sequence once per test binary.
-#![allow(dead_code)] // each test binary uses its own subset
+//! synthetic sequence once per test run.
+#![allow(dead_code)] // not every helper is used by every build (the rerun module is optional)
 
 use std::path::Path;
 use std::process::{Command, Output};
