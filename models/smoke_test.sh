@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
 # Smoke test of the whole Python path on one CPU thread (~1 minute): a few training iterations on
 # 8 images, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check;
-# KITTI pseudo-labels and a fine-tune with them.
-# Run from anywhere: bash models/smoke_test.sh   (needs: pip install -r models/requirements.txt)
+# KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
+# ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs.
+# Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
+# models/requirements.txt). With a semloc binary it also quantises the rebuilt network again
+# (64 calibration images) and checks that the .slm is byte for byte the committed one.
 set -euo pipefail
+semloc=${1:+$(realpath "$1")}
 cd "$(dirname "$0")"
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 out=runs/smoke
@@ -24,4 +28,24 @@ ds = camvid.CamVid('train', crop=(128, 192), items=camvid.list_synth('$out/pseud
 x, y = ds[0]
 assert len(ds) == 3 and tuple(x.shape[-2:]) == (128, 192), (len(ds), x.shape)
 print('pseudo-labelled frames load through the training augmentation:', len(ds))"
+# The deployed network's checkpoint is not committed: rebuilt from its ONNX, it exports the same
+# network again (and, with a semloc binary, the same int8 blob).
+rb=$out/rebuilt
+python3 onnx_to_checkpoint.py artefacts/fastscnn_r2_192x640.onnx --variant res2net --out $rb/deployed.pt
+python3 export.py --checkpoint $rb/deployed.pt --size 192x640 --out $rb/fastscnn_r2_192x640.onnx
+python3 -c "
+import numpy as np, onnxruntime as ort
+x = np.random.default_rng(1).random((1, 1, 192, 640), dtype=np.float32)
+a, b = (ort.InferenceSession(p).run(None, {'luma': x})[0]
+        for p in ('artefacts/fastscnn_r2_192x640.onnx', '$rb/fastscnn_r2_192x640.onnx'))
+d = float(np.abs(a - b).max())
+assert d < 1e-4 and (a.argmax(1) == b.argmax(1)).all(), d
+print('re-exported deployed network: max|diff| %.1e, same labels' % d)"
+if [ -n "$semloc" ]; then
+  python3 quantise.py --checkpoint $rb/deployed.pt --onnx $rb/fastscnn_r2_192x640.onnx --calib 64 --limit-val 4
+  "$semloc" convert --onnx $rb/fastscnn_r2_192x640.onnx --quant $rb/fastscnn_r2_192x640.quant.json \
+    --out $rb/fastscnn_r2_192x640.slm
+  cmp $rb/fastscnn_r2_192x640.slm artefacts/fastscnn_r2_192x640.slm
+  echo "rebuilt deployed network: .slm identical to the committed one"
+fi
 echo "smoke test OK"
