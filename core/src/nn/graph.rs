@@ -283,13 +283,16 @@ pub fn argmax(logits: &[i8], shape: Shape, labels: &mut [u8]) -> Result<(), Mode
     Ok(())
 }
 
-/// How a camera frame maps onto the network's static input: an integer down-scaling `factor`
-/// (`f × f` box mean) and edge-replicated padding on the right and bottom.
+/// How a camera frame maps onto the network's static input: a down-scaling by `num / den`
+/// frame pixels per input pixel (an area mean; `den = 1` is an integer `f × f` box mean) and
+/// edge-replicated padding on the right and bottom.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Letterbox {
-    /// Down-scaling factor (1 = native resolution).
-    pub factor: usize,
+    /// Numerator of the down-scaling (`num / den` frame pixels per input pixel).
+    pub num: usize,
+    /// Denominator of the down-scaling (1 ..= [`Letterbox::MAX_DEN`]).
+    pub den: usize,
     /// Frame width.
     pub src_w: usize,
     /// Frame height.
@@ -301,8 +304,14 @@ pub struct Letterbox {
 }
 
 impl Letterbox {
-    /// The smallest factor `f ≤ 8` with `ceil(src / f)` fitting the model input (KITTI
-    /// 1241x376 → 192x640: `f = 2`; CamVid 480x360 → 384x480: `f = 1`).
+    /// Largest denominator of a fractional down-scaling.
+    pub const MAX_DEN: usize = 4;
+    /// Largest down-scaling (frame pixels per input pixel).
+    pub const MAX_SCALE: usize = 8;
+
+    /// The smallest down-scaling `num / den ≥ 1` (`den ≤ 4`, at most 8) with
+    /// `ceil(src · den / num)` fitting the model input (KITTI 1241x376 → 192x640: 2;
+    /// → 256x832: 3/2; CamVid 480x360 → 384x480: 1).
     pub fn fit(
         src_w: usize,
         src_h: usize,
@@ -312,50 +321,111 @@ impl Letterbox {
         if src_w == 0 || src_h == 0 || model_w == 0 || model_h == 0 {
             return Err(ModelError::BadIo);
         }
-        (1..=8)
-            .find(|&f| src_w.div_ceil(f) <= model_w && src_h.div_ceil(f) <= model_h)
-            .map(|factor| Self { factor, src_w, src_h, model_w, model_h })
+        let mut best: Option<(usize, usize)> = None;
+        for den in 1..=Self::MAX_DEN {
+            // the smallest numerator that fits with this denominator
+            let fits = |num: usize| {
+                (src_w * den).div_ceil(num) <= model_w && (src_h * den).div_ceil(num) <= model_h
+            };
+            if let Some(num) = (den..=Self::MAX_SCALE * den).find(|&n| fits(n)) {
+                // strictly smaller only: equal values keep the smaller denominator
+                if best.is_none_or(|(bn, bd)| num * bd < bn * den) {
+                    best = Some((num, den));
+                }
+            }
+        }
+        best.map(|(num, den)| Self { num, den, src_w, src_h, model_w, model_h })
             .ok_or(ModelError::BadIo)
+    }
+
+    /// The down-scaling as a number (frame pixels per input pixel).
+    pub fn scale(&self) -> f64 {
+        self.num as f64 / self.den.max(1) as f64
     }
 
     /// Width of the scaled frame inside the input map.
     pub fn scaled_w(&self) -> usize {
-        self.src_w.div_ceil(self.factor)
+        (self.src_w * self.den).div_ceil(self.num.max(1))
     }
 
     /// Height of the scaled frame inside the input map.
     pub fn scaled_h(&self) -> usize {
-        self.src_h.div_ceil(self.factor)
+        (self.src_h * self.den).div_ceil(self.num.max(1))
+    }
+
+    fn valid(&self) -> bool {
+        self.num >= self.den
+            && (1..=Self::MAX_DEN).contains(&self.den)
+            && self.num <= Self::MAX_SCALE * self.den
+            && self.scaled_w() <= self.model_w
+            && self.scaled_h() <= self.model_h
+    }
+}
+
+/// The frame pixels under input pixel `i` of one axis, in units of `1 / den` frame pixel: input
+/// pixel `i` spans `[i·num, (i+1)·num)`, frame pixel `s` spans `[s·den, (s+1)·den)`, clipped to
+/// the frame's `len` pixels. Returns the first frame pixel, the number of frame pixels and the
+/// total overlap; `weight(k)` is the overlap of the `k`-th of them.
+#[derive(Clone, Copy)]
+struct Span {
+    lo: usize,
+    hi: usize,
+    den: usize,
+    first: usize,
+    count: usize,
+    total: u32,
+}
+
+impl Span {
+    fn new(i: usize, num: usize, den: usize, len: usize) -> Self {
+        let lo = i * num;
+        let hi = ((i + 1) * num).min(len * den);
+        let first = lo / den;
+        let count = hi.div_ceil(den) - first;
+        Self { lo, hi, den, first, count, total: (hi - lo) as u32 }
+    }
+
+    fn weight(&self, k: usize) -> u32 {
+        let s = self.first + k;
+        let a = (s * self.den).max(self.lo);
+        let b = ((s + 1) * self.den).min(self.hi);
+        (b - a) as u32
     }
 }
 
 /// Fills the `model_h × model_w` input map from a `src_w × src_h` luma frame: each input pixel
-/// is the mean of its `f × f` block (the real pixels of a clipped edge block; rounded half up),
-/// and the padding repeats the last scaled column / row.
+/// is the area mean of the frame pixels it covers (integer overlap weights, so the result is
+/// the same on every target; a clipped edge pixel averages the real pixels only; rounded half
+/// up), and the padding repeats the last scaled column / row. With an integer scale `f` this is
+/// the mean of the `f × f` block.
 pub fn prepare_input(src: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<(), ModelError> {
-    let (sw, sh, f) = (lb.src_w, lb.src_h, lb.factor);
+    let (sw, sh, num, den) = (lb.src_w, lb.src_h, lb.num, lb.den);
     if src.len() < sw * sh {
         return Err(ModelError::Truncated { need: sw * sh, got: src.len() });
     }
     if out.len() < lb.model_w * lb.model_h {
         return Err(ModelError::Truncated { need: lb.model_w * lb.model_h, got: out.len() });
     }
-    let (w, h) = (lb.scaled_w(), lb.scaled_h());
-    if f == 0 || w > lb.model_w || h > lb.model_h {
+    if !lb.valid() || sw == 0 || sh == 0 {
         return Err(ModelError::BadIo);
     }
+    let (w, h) = (lb.scaled_w(), lb.scaled_h());
     for y in 0..h {
         let row = &mut out[y * lb.model_w..(y + 1) * lb.model_w];
-        let y0 = y * f;
-        let y1 = (y0 + f).min(sh);
+        let sy = Span::new(y, num, den, sh);
         for (x, o) in row[..w].iter_mut().enumerate() {
-            let x0 = x * f;
-            let x1 = (x0 + f).min(sw);
+            let sx = Span::new(x, num, den, sw);
             let mut sum = 0u32;
-            for sy in y0..y1 {
-                sum += src[sy * sw + x0..sy * sw + x1].iter().map(|&v| v as u32).sum::<u32>();
+            for ky in 0..sy.count {
+                let line = &src[(sy.first + ky) * sw + sx.first..][..sx.count];
+                let row_sum: u32 = if den == 1 {
+                    line.iter().map(|&v| v as u32).sum()
+                } else {
+                    line.iter().enumerate().map(|(kx, &v)| sx.weight(kx) * v as u32).sum()
+                };
+                sum += sy.weight(ky) * row_sum;
             }
-            let n = ((y1 - y0) * (x1 - x0)) as u32;
+            let n = sx.total * sy.total;
             *o = ((sum + n / 2) / n) as u8;
         }
         let edge = row[w - 1];
@@ -369,22 +439,25 @@ pub fn prepare_input(src: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<(), M
     Ok(())
 }
 
-/// Labels of the input map back on the frame: `out[y][x] = labels[y / f][x / f]`.
+/// Labels of the input map back on the frame: each frame pixel takes the label of the input
+/// pixel under its centre, `out[y][x] = labels[⌊(2y+1)·den / 2num⌋][⌊(2x+1)·den / 2num⌋]`
+/// (`labels[y / f][x / f]` for an integer scale `f`).
 pub fn labels_to_frame(labels: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<(), ModelError> {
-    let (sw, sh, f) = (lb.src_w, lb.src_h, lb.factor);
+    let (sw, sh, num, den) = (lb.src_w, lb.src_h, lb.num, lb.den);
     if labels.len() < lb.model_w * lb.model_h {
         return Err(ModelError::Truncated { need: lb.model_w * lb.model_h, got: labels.len() });
     }
     if out.len() < sw * sh {
         return Err(ModelError::Truncated { need: sw * sh, got: out.len() });
     }
-    if f == 0 || lb.scaled_w() > lb.model_w || lb.scaled_h() > lb.model_h {
+    if !lb.valid() {
         return Err(ModelError::BadIo);
     }
+    let at = |s: usize| ((2 * s + 1) * den) / (2 * num);
     for (y, row) in out[..sw * sh].chunks_exact_mut(sw).enumerate() {
-        let lrow = &labels[(y / f) * lb.model_w..];
+        let lrow = &labels[at(y) * lb.model_w..];
         for (x, o) in row.iter_mut().enumerate() {
-            *o = lrow[x / f];
+            *o = lrow[at(x)];
         }
     }
     Ok(())
@@ -587,7 +660,7 @@ mod tests {
         let (sw, sh) = (45, 31);
         let luma: Vec<u8> = (0..sw * sh).map(|_| rng.int(0, 255) as u8).collect();
         let lb = Letterbox::fit(sw, sh, 16, 24).unwrap();
-        assert_eq!(lb.factor, 2);
+        assert_eq!((lb.num, lb.den), (2, 1));
         let (mut input, mut arena, mut labels) =
             (vec![0u8; 16 * 24], vec![0i8; m.arena_len()], vec![0u8; 16 * 24]);
         let mut out = vec![0u8; sw * sh];
@@ -620,14 +693,14 @@ mod tests {
     #[test]
     fn letterbox_maps_frames_both_ways() {
         let lb = Letterbox::fit(1241, 376, 192, 640).unwrap();
-        assert_eq!((lb.factor, lb.scaled_w(), lb.scaled_h()), (2, 621, 188));
+        assert_eq!((lb.num, lb.den, lb.scaled_w(), lb.scaled_h()), (2, 1, 621, 188));
         let lb1 = Letterbox::fit(480, 360, 384, 480).unwrap();
-        assert_eq!(lb1.factor, 1);
+        assert_eq!((lb1.num, lb1.den), (1, 1));
         assert!(Letterbox::fit(10000, 376, 192, 640).is_err());
         let (sw, sh) = (7, 5);
         let src: Vec<u8> = (0..sw * sh).map(|i| (i * 7 % 256) as u8).collect();
-        let lb = Letterbox::fit(sw, sh, 4, 6).unwrap();
-        assert_eq!(lb.factor, 2);
+        // an integer scale of 2 (`fit` would take 5/4 here, see below)
+        let lb = Letterbox { num: 2, den: 1, src_w: sw, src_h: sh, model_w: 6, model_h: 4 };
         let mut inp = vec![0u8; 24];
         prepare_input(&src, &lb, &mut inp).unwrap();
         // block (0,0): pixels 0,1,7,8 → values 0,7,49,56 → mean 28
@@ -645,5 +718,77 @@ mod tests {
         assert_eq!(out[6], 3);
         assert_eq!(out[4 * sw + 6], 2 * 6 + 3);
         assert!(prepare_input(&src[1..], &lb, &mut inp).is_err());
+        // a scale `fit` cannot produce is refused, not read out of bounds
+        let bad = Letterbox { num: 1, den: 1, ..lb };
+        assert_eq!(prepare_input(&src, &bad, &mut inp), Err(ModelError::BadIo));
+        assert_eq!(labels_to_frame(&labels, &bad, &mut out), Err(ModelError::BadIo));
+    }
+
+    #[test]
+    fn letterbox_takes_the_smallest_fractional_scale() {
+        // KITTI into the 256x832 input: 3/2 (828x251), where whole factors give 2 (621x188)
+        let lb = Letterbox::fit(1241, 376, 256, 832).unwrap();
+        assert_eq!((lb.num, lb.den, lb.scaled_w(), lb.scaled_h()), (3, 2, 828, 251));
+        // a 7x5 frame into 4x6: 5/4 (6x4), not 2 (4x3)
+        let lb = Letterbox::fit(7, 5, 4, 6).unwrap();
+        assert_eq!((lb.num, lb.den, lb.scaled_w(), lb.scaled_h()), (5, 4, 6, 4));
+        // equal scales keep the smaller denominator: 4/2 and 8/4 are 2/1
+        let lb = Letterbox::fit(20, 10, 5, 10).unwrap();
+        assert_eq!((lb.num, lb.den), (2, 1));
+        // every frame width from 1 to 200 into every input width from 1 to 40: the scale
+        // found is the smallest of all num/den (den ≤ 4, ≤ 8) that fit
+        for sw in 1..200 {
+            for mw in 1..40 {
+                let fits = |n: usize, d: usize| (sw * d).div_ceil(n) <= mw;
+                let brute = (1..=4)
+                    .flat_map(|d| (d..=8 * d).map(move |n| (n, d)))
+                    .filter(|&(n, d)| fits(n, d))
+                    .min_by(|a, b| (a.0 * b.1).cmp(&(b.0 * a.1)).then(a.1.cmp(&b.1)));
+                let got = Letterbox::fit(sw, 1, 1, mw).ok().map(|l| (l.num, l.den));
+                assert_eq!(got, brute, "{sw} into {mw}");
+            }
+        }
+    }
+
+    #[test]
+    fn fractional_letterbox_is_the_area_mean() {
+        // 3/2: input pixel 0 covers frame pixels 0 and half of 1, input pixel 1 the other
+        // half of 1 and pixel 2 (per axis)
+        let (sw, sh) = (5, 3);
+        let src: Vec<u8> = (0..sw * sh).map(|i| (i * 17 % 256) as u8).collect();
+        let lb = Letterbox { num: 3, den: 2, src_w: sw, src_h: sh, model_w: 4, model_h: 2 };
+        assert_eq!((lb.scaled_w(), lb.scaled_h()), (4, 2));
+        let mut inp = vec![0u8; 8];
+        prepare_input(&src, &lb, &mut inp).unwrap();
+        let px = |x: usize, y: usize| src[y * sw + x] as f64;
+        // weights per axis in halves: pixel 0 → (0: 2, 1: 1); pixel 1 → (1: 1, 2: 2);
+        // pixel 2 → (3: 2, 4: 1); pixel 3 → (4: 1) only (the frame ends at 5)
+        let axis = |i: usize, len: usize| -> Vec<(usize, f64)> {
+            let (lo, hi) = (i * 3, ((i + 1) * 3).min(len * 2));
+            (lo / 2..hi.div_ceil(2))
+                .map(|s| (s, ((s * 2 + 2).min(hi) - (s * 2).max(lo)) as f64))
+                .collect()
+        };
+        for y in 0..2 {
+            for x in 0..4 {
+                let (ax, ay) = (axis(x, sw), axis(y, sh));
+                let (mut s, mut n) = (0.0, 0.0);
+                for &(fy, wy) in &ay {
+                    for &(fx, wx) in &ax {
+                        s += wx * wy * px(fx, fy);
+                        n += wx * wy;
+                    }
+                }
+                assert_eq!(inp[y * 4 + x], (s / n + 0.5).floor() as u8, "({x}, {y})");
+            }
+        }
+        // labels back: frame pixel centres 0.5, 1.5, 2.5, 3.5, 4.5 → input 0.33, 1, 1.67,
+        // 2.33, 3 → columns 0, 1, 1, 2, 3; rows 0.33, 1, 1.67 → 0, 1, 1
+        let labels: Vec<u8> = (0..8).map(|i| i as u8).collect();
+        let mut out = vec![0u8; sw * sh];
+        labels_to_frame(&labels, &lb, &mut out).unwrap();
+        assert_eq!(&out[..5], &[0, 1, 1, 2, 3]);
+        assert_eq!(&out[5..10], &[4, 5, 5, 6, 7]);
+        assert_eq!(&out[10..15], &[4, 5, 5, 6, 7]);
     }
 }

@@ -54,7 +54,7 @@ pub struct BenchArgs {
 #[derive(Debug, serde::Serialize)]
 struct SegBench {
     input_hw: (usize, usize),
-    letterbox_factor: usize,
+    letterbox_factor: f64,
     runs: usize,
     int8_core_1thread: Percentiles,
     tract_f32_1thread: Percentiles,
@@ -226,13 +226,13 @@ fn seg_times(
         }
         (kinds, by_kind)
     };
-    let mut factor = 0;
+    let mut factor = 0.0;
     let (mut t8, mut t32) = (Vec::new(), Vec::new());
     let pb = super::progress((lefts.len() * repeat) as u64, "seg bench");
     for _ in 0..repeat {
         for left in lefts {
             let (lb, _) = seg.prepare(left)?;
-            factor = lb.factor;
+            factor = lb.scale();
             let mut frame: BTreeMap<&'static str, f64> = BTreeMap::new();
             let t = Instant::now();
             let mut last = t;

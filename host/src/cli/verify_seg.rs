@@ -87,7 +87,7 @@ struct Report {
     onnx: PathBuf,
     images: usize,
     input_hw: (usize, usize),
-    letterbox_factor: usize,
+    letterbox_factor: f64,
     reference_checked: usize,
     agreement_pct: f64,
     min_image_agreement_pct: f64,
@@ -133,7 +133,7 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
     let (mut c8, mut c32) = (Confusion::default(), Confusion::default());
     let (mut same, mut total, mut min_agree) = (0u64, 0u64, f64::INFINITY);
     let (mut ms8, mut ms32) = (Vec::new(), Vec::new());
-    let mut factor = 0;
+    let mut factor = 0.0;
     let pb = super::progress(images.len() as u64, "verify");
     for (i, path) in images.iter().enumerate() {
         let frame = load_luma_file(path)?;
@@ -152,7 +152,7 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
             }
         }
         let lb = seg.letterbox(w as usize, h as usize)?;
-        factor = lb.factor;
+        factor = lb.scale();
         let t = Instant::now();
         let f32_model = seg.reference(&tract)?;
         ms32.push(t.elapsed().as_secs_f64() * 1e3);

@@ -26,6 +26,7 @@ use std::path::{Path, PathBuf};
 use semloc_core::assoc::Association;
 use semloc_core::geom::Se3;
 use semloc_core::motion::FeatureMotion;
+use semloc_core::nn::graph::Letterbox;
 use semloc_core::orb::OrbConfig;
 use semloc_core::seg::WeightScheme;
 use semloc_core::stereo::StereoMatching;
@@ -401,8 +402,8 @@ pub enum RunError {
     /// The network's input is a different shape from the frames: most of it would be padding
     /// and its labels garbage.
     #[error(
-        "{}: the network's input is {}x{} but the frames are {width}x{height}; fitted by an \
-         integer down-scaling of {factor}, they cover only {:.0} % of the input (at least {:.0} \
+        "{}: the network's input is {}x{} but the frames are {width}x{height}; fitted by a \
+         down-scaling of {factor}, they cover only {:.0} % of the input (at least {:.0} \
          % needed). Use a network exported for this image shape (models/export.py --size HxW)",
         path.display(),
         input.0,
@@ -419,8 +420,8 @@ pub enum RunError {
         width: u32,
         /// Frame height (px).
         height: u32,
-        /// The letterbox's down-scaling factor.
-        factor: usize,
+        /// The letterbox's down-scaling (`2`, `3/2`).
+        factor: String,
         /// Share of the input the frame covers.
         coverage: f64,
     },
@@ -496,14 +497,14 @@ pub fn check_network_input(seg: &Segmenter, width: u32, height: u32) -> Result<(
         }
     })?;
     let (h, w) = seg.input_size();
-    let coverage = provenance::input_coverage(width, height, lb.factor, w, h);
+    let coverage = provenance::input_coverage(&lb);
     if coverage < MIN_INPUT_COVERAGE {
         return Err(RunError::NetworkShape {
             path: seg.blob().path().to_path_buf(),
             input: (w, h),
             width,
             height,
-            factor: lb.factor,
+            factor: provenance::scale_text(&lb),
             coverage,
         });
     }
@@ -512,14 +513,15 @@ pub fn check_network_input(seg: &Segmenter, width: u32, height: u32) -> Result<(
 
 /// The notice printed when a network's input does not match the frames exactly.
 fn letterbox_notice(m: &ModelInfo, width: u32, height: u32) -> Option<String> {
-    let f = m.downscale.max(1);
+    let lb = Letterbox::fit(width as usize, height as usize, m.input_height, m.input_width).ok()?;
     (m.coverage < 0.999).then(|| {
         format!(
-            "network {}: {width}x{height} frames are down-scaled 1/{f} to {}x{} and padded to its \
+            "network {}: {width}x{height} frames are down-scaled by {} to {}x{} and padded to its \
              {}x{} input ({:.1} % padding)",
             m.name,
-            (width as usize).div_ceil(f),
-            (height as usize).div_ceil(f),
+            provenance::scale_text(&lb),
+            lb.scaled_w(),
+            lb.scaled_h(),
             m.input_width,
             m.input_height,
             (1.0 - m.coverage) * 100.0

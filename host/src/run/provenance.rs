@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use semloc_core::nn::graph::Letterbox;
 use semloc_core::tracker::TrackerParams;
 use sha2::{Digest, Sha256};
 
@@ -68,9 +69,9 @@ pub struct ModelInfo {
     pub input_width: usize,
     /// Network input height (px).
     pub input_height: usize,
-    /// How frames are fitted to the input: the integer down-scaling factor, and the share of
-    /// the input the frame covers (the rest is padding).
-    pub downscale: usize,
+    /// How frames are fitted to the input: the down-scaling (frame pixels per input pixel:
+    /// 2 for KITTI into 192x640, 1.5 into 256x832).
+    pub downscale: f64,
     /// Share of the network input covered by the frame (0..1).
     pub coverage: f64,
 }
@@ -81,8 +82,8 @@ impl ModelInfo {
         let path = seg.blob().path().to_path_buf();
         let (h, w) = seg.input_size();
         let (downscale, coverage) = match seg.letterbox(width as usize, height as usize) {
-            Ok(lb) => (lb.factor, input_coverage(width, height, lb.factor, w, h)),
-            Err(_) => (0, 0.0),
+            Ok(lb) => (lb.scale(), input_coverage(&lb)),
+            Err(_) => (0.0, 0.0),
         };
         Self {
             name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
@@ -96,19 +97,20 @@ impl ModelInfo {
     }
 }
 
-/// The share of a `model_w`x`model_h` input that a `width`x`height` frame down-scaled by
-/// `factor` covers.
-pub fn input_coverage(
-    width: u32,
-    height: u32,
-    factor: usize,
-    model_w: usize,
-    model_h: usize,
-) -> f64 {
-    let f = factor.max(1);
-    let cw = (width as usize).div_ceil(f).min(model_w);
-    let ch = (height as usize).div_ceil(f).min(model_h);
-    (cw * ch) as f64 / (model_w * model_h).max(1) as f64
+/// The share of the network input that the letterboxed frame covers.
+pub fn input_coverage(lb: &Letterbox) -> f64 {
+    let cw = lb.scaled_w().min(lb.model_w);
+    let ch = lb.scaled_h().min(lb.model_h);
+    (cw * ch) as f64 / (lb.model_w * lb.model_h).max(1) as f64
+}
+
+/// The down-scaling as text: `2`, `3/2`.
+pub fn scale_text(lb: &Letterbox) -> String {
+    if lb.den == 1 {
+        lb.num.to_string()
+    } else {
+        format!("{}/{}", lb.num, lb.den)
+    }
 }
 
 /// Lower-case hex SHA-256 of `bytes`.
@@ -130,10 +132,17 @@ mod tests {
 
     #[test]
     fn coverage_of_kitti_on_the_shipped_inputs() {
-        // 1241x376 on 192x640 at factor 2: 621x188 of 640x192.
-        let c = input_coverage(1241, 376, 2, 640, 192);
+        let lb = |h, w| Letterbox::fit(1241, 376, h, w).unwrap();
+        // 1241x376 on 192x640 at 2: 621x188 of 640x192.
+        let c = input_coverage(&lb(192, 640));
         assert!((c - 621.0 * 188.0 / (640.0 * 192.0)).abs() < 1e-12, "{c}");
-        // On CamVid's 384x480 input at factor 3: 414x126, under a third of it.
-        assert!(input_coverage(1241, 376, 3, 480, 384) < 0.3);
+        assert_eq!(scale_text(&lb(192, 640)), "2");
+        // on 256x832 at 3/2: 828x251
+        let c = input_coverage(&lb(256, 832));
+        assert!((c - 828.0 * 251.0 / (832.0 * 256.0)).abs() < 1e-12, "{c}");
+        assert_eq!(scale_text(&lb(256, 832)), "3/2");
+        // On CamVid's 384x480 input at 8/3: 466x141, under a third of it.
+        assert_eq!(scale_text(&lb(384, 480)), "8/3");
+        assert!(input_coverage(&lb(384, 480)) < 0.36);
     }
 }

@@ -110,7 +110,7 @@ fn verify_seg_scores_a_camvid_layout_and_checks_kernels() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(v["images"], 2);
     assert_eq!(v["reference_checked"], 2);
-    assert_eq!(v["letterbox_factor"], 1);
+    assert_eq!(v["letterbox_factor"], 1.0);
     let agree = v["agreement_pct"].as_f64().unwrap();
     assert!((0.0..=100.0).contains(&agree));
     assert!(v["int8"]["miou"].is_number() && v["f32"]["miou"].is_number());

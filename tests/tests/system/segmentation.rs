@@ -120,7 +120,7 @@ fn compare(stem: &str, images: &[PathBuf], annot: Option<&Path>) -> Compared {
             let lab = image::open(annot.join(p.file_name().unwrap()).with_extension("png"))
                 .unwrap()
                 .to_luma8();
-            assert_eq!(lb.factor, 1);
+            assert_eq!((lb.num, lb.den), (1, 1));
             let crop = |l: &[u8]| -> Vec<u8> {
                 (0..h).flat_map(|y| l[y * mw..y * mw + w].to_vec()).collect()
             };
