@@ -18,7 +18,7 @@ use semloc_core::tracker::TrackerParams;
 
 use super::eval::AlignArg;
 use super::info::DatasetArgs;
-use super::run::{run_with_progress, AssocArg, SemanticsArg};
+use super::run::{run_with_progress, AssocArg, SemanticsArg, SettingsFileArgs};
 
 /// Arguments of `semloc ablate`.
 #[derive(Args, Debug)]
@@ -30,6 +30,10 @@ pub struct AblateArgs {
     /// run` writes, plus `ablation.json` and `ablation.txt` (the table).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// `--config` / `--orbslam2-settings`: every row starts from these settings (as `semloc
+    /// run` takes them); the row sets only its semantics and association.
+    #[command(flatten)]
+    pub settings: SettingsFileArgs,
     /// Use a non-empty --out: first remove what `semloc ablate` wrote there before.
     #[arg(long)]
     pub force: bool,
@@ -483,14 +487,19 @@ fn feature_share(seq: &Sequence, model: Option<&PathBuf>, n: usize) -> Result<Sh
 
 /// Runs `semloc ablate`.
 pub fn run(args: &AblateArgs) -> Result<()> {
-    let opened = args.data.open()?;
+    let (settings, settings_file) = args.settings.load()?;
+    let opened = args.data.open_with_camera(settings.camera.as_ref().map(|c| c.calib()))?;
+    for n in &opened.notes {
+        eprintln!("note: {n}");
+    }
+    let model = args.model.clone().or(settings.semantics.model.clone());
     // `--first-frames`: every start is checked before the output folder is touched; the main
     // table, the feature share and the overlay are the first start's (the sequence as opened
     // when there is none).
     let starts: Vec<Sequence> =
         args.first_frames.iter().map(|&f| opened.starting_at(f)).collect::<Result<_, _>>()?;
     let seq = starts.first().unwrap_or(&opened);
-    let labelled = args.model.is_some() || seq.has_labels();
+    let labelled = model.is_some() || seq.has_labels();
     if !labelled && args.semantics.iter().any(|&s| s != SemanticsArg::Off) {
         anyhow::bail!(
             "the semantic rows need labels: give the network with --model FILE.slm, use a \
@@ -504,8 +513,13 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
         command_line: super::command_line(),
         threads: args.threads,
-        network: args.model.clone().map(Network::File),
+        network: model.clone().map(Network::File),
         align: args.align.into(),
+        tracker: settings.tracker,
+        orb: settings.orb,
+        stereo: settings.stereo,
+        camera: settings.camera,
+        settings_file: settings_file.clone(),
         ..RunConfig::new(seq, &args.out)
     };
     let pairs: Vec<(Semantics, Association)> = args

@@ -15,7 +15,7 @@ use semloc_core::assoc::Association;
 
 use super::ablate::{median_min_max as spread, run_rows_over_seeds, MAX_SEEDS};
 use super::eval::AlignArg;
-use super::run::{AssocArg, SemanticsArg};
+use super::run::{AssocArg, SemanticsArg, SettingsFileArgs};
 
 /// Arguments of `semloc bench-kitti`.
 #[derive(Args, Debug)]
@@ -31,6 +31,10 @@ pub struct BenchKittiArgs {
     /// Use a non-empty --out: first remove what `semloc bench-kitti` wrote there before.
     #[arg(long)]
     pub force: bool,
+    /// `--config` / `--orbslam2-settings`: every configuration starts from these settings (as
+    /// `semloc run` takes them); each sets only its semantics and association.
+    #[command(flatten)]
+    pub settings: SettingsFileArgs,
     /// Only these sequences (comma-separated, e.g. `01,06`); default: every one in ROOT.
     #[arg(long, value_delimiter = ',', value_name = "XX")]
     pub seqs: Vec<String>,
@@ -256,6 +260,8 @@ pub fn table(rows: &[SeqRow], align: &str) -> String {
 /// Runs `semloc bench-kitti`.
 pub fn run(args: &BenchKittiArgs) -> Result<()> {
     let seqs = sequences(&args.root, &args.seqs)?;
+    let (settings, settings_file) = args.settings.load()?;
+    let model = args.model.clone().or(settings.semantics.model.clone());
     if let Some(r) = &args.reference {
         if !r.is_dir() {
             anyhow::bail!("--reference {}: not a folder", r.display());
@@ -280,8 +286,13 @@ pub fn run(args: &BenchKittiArgs) -> Result<()> {
             max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
             command_line: super::command_line(),
             threads: args.threads,
-            network: args.model.clone().map(Network::File),
+            network: model.clone().map(Network::File),
             align,
+            tracker: settings.tracker,
+            orb: settings.orb,
+            stereo: settings.stereo,
+            camera: settings.camera,
+            settings_file: settings_file.clone(),
             ..RunConfig::new(&seq, &out)
         };
         let n = base().frame_count();

@@ -33,15 +33,9 @@ pub struct RunArgs {
     /// cores); 1 runs everything on one thread. Results are identical either way.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
     pub threads: u8,
-    /// Settings file (TOML): camera, ORB, stereo, tracker, EM, motion and semantic parameters
-    /// (`semloc config --print-defaults` prints every key with its unit and default). Flags
-    /// given here override it.
-    #[arg(long, value_name = "FILE", conflicts_with = "orbslam2_settings")]
-    pub config: Option<PathBuf>,
-    /// An ORB-SLAM2 stereo settings file (YAML, e.g. KITTI00-02.yaml): its camera (Camera.fx,
-    /// fy, cx, cy, bf), ThDepth and ORBextractor.* are used; the images must be rectified.
-    #[arg(long, value_name = "FILE")]
-    pub orbslam2_settings: Option<PathBuf>,
+    /// `--config` / `--orbslam2-settings`.
+    #[command(flatten)]
+    pub settings: SettingsFileArgs,
     /// RANSAC hypotheses per frame before pose optimisation (0 turns RANSAC off: the pose is
     /// then optimised from the constant-velocity prediction only). Default: 100, or the
     /// settings file's.
@@ -147,6 +141,33 @@ pub fn run_with_progress(mut cfg: RunConfig<'_>) -> Result<RunResult> {
     result.map_err(Into::into)
 }
 
+/// The settings file of `semloc run`, `ablate` and `bench-kitti`.
+#[derive(Args, Debug, Default, Clone)]
+pub struct SettingsFileArgs {
+    /// Settings file (TOML): camera, ORB, stereo, tracker, EM, motion and semantic parameters
+    /// (`semloc config --print-defaults` prints every key with its unit and default). Flags
+    /// given here override it.
+    #[arg(long, value_name = "FILE", conflicts_with = "orbslam2_settings")]
+    pub config: Option<PathBuf>,
+    /// An ORB-SLAM2 stereo settings file (YAML, e.g. KITTI00-02.yaml): its camera (Camera.fx,
+    /// fy, cx, cy, bf), ThDepth and ORBextractor.* are used; the images must be rectified.
+    #[arg(long, value_name = "FILE")]
+    pub orbslam2_settings: Option<PathBuf>,
+}
+
+impl SettingsFileArgs {
+    /// The settings (defaults without a file) and the file they came from; notes on what an
+    /// ORB-SLAM2 file holds that is not used are printed.
+    pub fn load(&self) -> Result<(Settings, Option<PathBuf>)> {
+        let (settings, file, ignored) =
+            load_settings(self.config.as_deref(), self.orbslam2_settings.as_deref())?;
+        for n in &ignored {
+            eprintln!("note: {}: {n}", file.as_deref().unwrap_or(Path::new("")).display());
+        }
+        Ok((settings, file))
+    }
+}
+
 /// The settings of `--config` or `--orbslam2-settings` (with notes on what an ORB-SLAM2 file
 /// holds that is not used), or the defaults.
 pub fn load_settings(
@@ -165,11 +186,7 @@ pub fn load_settings(
 
 /// Runs `semloc run`.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let (settings, settings_file, ignored) =
-        load_settings(args.config.as_deref(), args.orbslam2_settings.as_deref())?;
-    for n in &ignored {
-        eprintln!("note: {}: {n}", settings_file.as_deref().unwrap_or(Path::new("")).display());
-    }
+    let (settings, settings_file) = args.settings.load()?;
     for (flag, file) in [("--export-map", &args.export_map), ("--rerun", &args.rerun)] {
         let Some(p) = file else { continue };
         let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));

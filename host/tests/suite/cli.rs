@@ -293,6 +293,79 @@ fn ablate_runs_every_combination_into_one_table() {
     assert!(pct("structure_pct_semantic") > pct("structure_pct_plain"), "{share}");
 }
 
+/// `--config` reaches every row of `semloc ablate` and `semloc bench-kitti` as it reaches
+/// `semloc run`: each row's summary records the file and its values, each row still sets its
+/// own semantics and association, and the rows differ from a run on the defaults.
+#[test]
+fn ablate_and_bench_kitti_take_a_settings_file() {
+    let street = crate::common::synth("10", "high", "3");
+    let data = street.path().to_str().unwrap().to_owned();
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("rig.toml");
+    std::fs::write(&cfg, "[orb]\nn_features = 700\n\n[tracker.motion]\nmax_frame_llr = 1.4\n")
+        .unwrap();
+    let summary = |p: std::path::PathBuf| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p.join("summary.json")).unwrap()).unwrap()
+    };
+    let ablate = |out: &std::path::Path, config: Option<&std::path::Path>| {
+        let mut a: Vec<&str> = vec!["ablate", &data, "--out", out.to_str().unwrap()];
+        a.extend(["--semantics", "off,motion", "--assoc", "hard,em"]);
+        if let Some(c) = config {
+            a.extend(["--config", c.to_str().unwrap()]);
+        }
+        let o = semloc(&a);
+        assert!(o.status.success(), "{:?}", text(&o));
+    };
+    let (with, without) = (dir.path().join("with"), dir.path().join("without"));
+    ablate(&with, Some(&cfg));
+    ablate(&without, None);
+    for (row, assoc) in [("off-hard", "hard"), ("motion-em", "em")] {
+        let (v, d) = (summary(with.join(row)), summary(without.join(row)));
+        let p = &v["provenance"];
+        assert!(p["settings_file"].as_str().is_some_and(|f| f.ends_with("rig.toml")), "{p}");
+        assert_eq!(p["orb"]["n_features"], 700, "{p}");
+        assert_eq!(p["tracker"]["motion"]["max_frame_llr"], 1.4, "{p}");
+        assert_eq!(p["tracker"]["association"], assoc, "{p}");
+        assert_eq!(d["provenance"]["orb"]["n_features"], 2000);
+        assert!(d["provenance"]["settings_file"].is_null());
+        let traj =
+            |o: &std::path::Path| std::fs::read_to_string(o.join(row).join("trajectory.txt"));
+        assert_ne!(
+            traj(&with).unwrap(),
+            traj(&without).unwrap(),
+            "{row}: 700 features track differently"
+        );
+    }
+    // bench-kitti: the synthetic street is a one-sequence odometry root
+    let out = dir.path().join("bench");
+    let root = street.path();
+    let o = semloc(&[
+        "bench-kitti",
+        root.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--config",
+        cfg.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let v = summary(out.join("00").join("off-hard"));
+    assert_eq!(v["provenance"]["orb"]["n_features"], 700, "{}", v["provenance"]);
+    // a settings file that does not parse is a typed error naming it, before anything runs
+    std::fs::write(&cfg, "[orb]\nn_features = \"many\"\n").unwrap();
+    let bad = dir.path().join("bad");
+    let o = semloc(&[
+        "ablate",
+        &data,
+        "--out",
+        bad.to_str().unwrap(),
+        "--config",
+        cfg.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{:?}", text(&o));
+    assert!(text(&o).1.contains("rig.toml"), "{:?}", text(&o));
+    assert!(!bad.exists(), "nothing written");
+}
+
 /// `--seeds N` tracks every row with RANSAC seeds 0..N-1: seed 0 in the row's folder, the
 /// others beside it, each recording its seed; the table and JSON give the ATE over seeds.
 #[test]
