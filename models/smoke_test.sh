@@ -12,7 +12,8 @@ cd "$(dirname "$0")"
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 out=runs/smoke
 for v in res2net bottleneck; do
-  python3 train.py --variant $v --epochs 3 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 \
+  mix=$([ $v = bottleneck ] && echo "--classmix 0.5" || true)
+  python3 train.py --variant $v --epochs 3 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 $mix \
     --eval-every 1 --threads 1 --out $out/$v
   python3 export.py --checkpoint $out/$v/best.pt --size 192x624 --out $out/$v/fastscnn_${v}_192x624.onnx
   python3 quantise.py --checkpoint $out/$v/best.pt --onnx $out/$v/fastscnn_${v}_192x624.onnx \

@@ -70,10 +70,37 @@ def get_args(argv=None):
     p.add_argument("--synth-every", type=int, default=1)
     p.add_argument("--aug", choices=["basic", "strong"], default="basic",
                    help="strong: wider exposure range, blur, more noise (KITTI-like appearance)")
+    p.add_argument("--classmix", type=float, default=0.0, metavar="P",
+                   help="ClassMix (Olsson et al. 2021): with probability P per sample, paste the "
+                   "pixels of half the classes of another image of the batch, labels with them "
+                   "(new layouts from the same few sequences)")
     p.add_argument("--resume", default="", help="checkpoint to start from: weights, and when it holds "
                    "them (every last.pt does) the optimiser state, epoch and iteration, so the "
                    "schedule continues where an interrupted run stopped")
     return p.parse_args(argv)
+
+
+def classmix(x, y, gen, p):
+    """ClassMix on a batch: sample i (with probability p) takes from sample i+1 (cyclic) the
+    pixels of a random half of the classes present there, image and labels alike. `gen` is a
+    CPU torch.Generator (deterministic for a seed). Returns new tensors."""
+    n = x.shape[0]
+    if n < 2 or p <= 0:
+        return x, y
+    x, y = x.clone(), y.clone()
+    src_x, src_y = x.roll(1, 0).clone(), y.roll(1, 0).clone()
+    for i in range(n):
+        if torch.rand((), generator=gen).item() >= p:
+            continue
+        present = torch.unique(src_y[i].cpu())
+        present = present[present != IGNORE_INDEX]
+        if len(present) < 2:
+            continue
+        pick = present[torch.randperm(len(present), generator=gen)[: len(present) // 2]]
+        m = torch.isin(src_y[i], pick.to(src_y.device))
+        x[i] = torch.where(m.unsqueeze(0), src_x[i], x[i])
+        y[i] = torch.where(m, src_y[i], y[i])
+    return x, y
 
 
 def seed_all(seed):
@@ -184,6 +211,8 @@ def main(argv=None):
         history, best = resume.get("history", []), resume.get("best", best)
         print(f"resumed at epoch {start_epoch}, iteration {it}", flush=True)
     iter_times, data_times = [], []
+    mix_gen = torch.Generator()
+    mix_gen.manual_seed(a.seed + 7919)
     done = False
     fitted = None  # (iterations the schedule was cut to, s/iter it was measured at)
     for epoch in range(start_epoch, a.epochs):
@@ -196,6 +225,8 @@ def main(argv=None):
             for gr in opt.param_groups:
                 gr["lr"] = lr_at(it)
             x, y = x.to(device, non_blocking=True), y.to(device, non_blocking=True)
+            if a.classmix > 0:
+                x, y = classmix(x, y, mix_gen, a.classmix)
             with torch.autocast("cuda", dtype=torch.bfloat16, enabled=a.amp and device.type == "cuda"):
                 logits = model(x)
             if (y != IGNORE_INDEX).any():
