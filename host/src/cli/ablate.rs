@@ -18,7 +18,9 @@ use semloc_core::tracker::TrackerParams;
 
 use super::eval::AlignArg;
 use super::info::DatasetArgs;
-use super::run::{run_with_progress, AssocArg, SemanticsArg, SettingsFileArgs};
+use super::run::{
+    config_from_settings, run_with_progress, AssocArg, SemanticsArg, SettingsFileArgs,
+};
 
 /// Arguments of `semloc ablate`.
 #[derive(Args, Debug)]
@@ -515,12 +517,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         threads: args.threads,
         network: model.clone().map(Network::File),
         align: args.align.into(),
-        tracker: settings.tracker,
-        orb: settings.orb,
-        stereo: settings.stereo,
-        camera: settings.camera,
-        settings_file: settings_file.clone(),
-        ..RunConfig::new(seq, &args.out)
+        ..config_from_settings(seq, &args.out, &settings, settings_file.clone())
     };
     let pairs: Vec<(Semantics, Association)> = args
         .semantics

@@ -15,7 +15,7 @@ use semloc_core::assoc::Association;
 
 use super::ablate::{median_min_max as spread, run_rows_over_seeds, MAX_SEEDS};
 use super::eval::AlignArg;
-use super::run::{AssocArg, SemanticsArg, SettingsFileArgs};
+use super::run::{config_from_settings, AssocArg, SemanticsArg, SettingsFileArgs};
 
 /// Arguments of `semloc bench-kitti`.
 #[derive(Args, Debug)]
@@ -288,12 +288,7 @@ pub fn run(args: &BenchKittiArgs) -> Result<()> {
             threads: args.threads,
             network: model.clone().map(Network::File),
             align,
-            tracker: settings.tracker,
-            orb: settings.orb,
-            stereo: settings.stereo,
-            camera: settings.camera,
-            settings_file: settings_file.clone(),
-            ..RunConfig::new(&seq, &out)
+            ..config_from_settings(&seq, &out, &settings, settings_file.clone())
         };
         let n = base().frame_count();
         let runs = run_rows_over_seeds(&base, &pairs, &out, args.seeds)?;

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::Args;
+use semloc::dataset::Sequence;
 use semloc::eval::EvalReport;
 use semloc::run::{Network, RunConfig, RunResult, Semantics, StopFlag, Summary};
 use semloc::settings::Settings;
@@ -168,6 +169,24 @@ impl SettingsFileArgs {
     }
 }
 
+/// `semloc run`'s defaults for `seq`, but for the camera, ORB, stereo and tracker of
+/// `settings`, and the file they came from recorded.
+pub fn config_from_settings<'a>(
+    seq: &'a Sequence,
+    out: &Path,
+    settings: &Settings,
+    settings_file: Option<PathBuf>,
+) -> RunConfig<'a> {
+    RunConfig {
+        tracker: settings.tracker,
+        orb: settings.orb,
+        stereo: settings.stereo,
+        camera: settings.camera,
+        settings_file,
+        ..RunConfig::new(seq, out)
+    }
+}
+
 /// The settings of `--config` or `--orbslam2-settings` (with notes on what an ORB-SLAM2 file
 /// holds that is not used), or the defaults.
 pub fn load_settings(
@@ -212,17 +231,13 @@ pub fn run(args: &RunArgs) -> Result<()> {
         max_frames: args.max_frames.map(|n| usize::try_from(n).unwrap_or(usize::MAX)),
         threads: args.threads,
         tracker,
-        orb: settings.orb,
-        stereo: settings.stereo,
-        camera: settings.camera,
-        settings_file,
         semantics: args.semantics.map_or(settings.semantics.mode, Into::into),
-        network: args.model.clone().or(settings.semantics.model).map(Network::File),
+        network: args.model.clone().or(settings.semantics.model.clone()).map(Network::File),
         align: args.align.into(),
         force: args.force,
         export_map: args.export_map.clone(),
         rerun: args.rerun.clone(),
-        ..RunConfig::new(&seq, &args.out)
+        ..config_from_settings(&seq, &args.out, &settings, settings_file)
     };
     let outcome = run_with_progress(cfg)?;
     for n in &outcome.notices {
