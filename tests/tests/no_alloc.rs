@@ -4,9 +4,15 @@
 //! count must stay at zero.
 //!
 //! The large fixed-size state and the network's buffers are built before counting starts; only
-//! calls into `semloc-core` are inside the counted region. The tests take one lock because the
-//! counter is process-wide.
+//! calls into `semloc-core` are inside the counted region. The counter is per thread: `core` is
+//! `no_std` and never starts a thread, so everything it does runs on the thread that counts,
+//! while the test harness's own allocations on other threads (printing a finished test's
+//! result, spawning the next one) stay out of the count. With a process-wide counter they
+//! landed in the region on a loaded machine: 19 "allocations while segmenting" in a CI run
+//! that shared its two cores with a training job, none of them core's.
 
+use core::alloc::{GlobalAlloc, Layout};
+use core::cell::Cell;
 use std::alloc::System;
 use std::sync::Mutex;
 
@@ -15,10 +21,53 @@ use semloc_core::geom::StereoCamera;
 use semloc_core::localiser::{Localiser, LocaliserConfig, Network, NetworkMemory};
 use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
-use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
+
+thread_local! {
+    /// Allocations and reallocations made by this thread so far. A `const` initialiser and a
+    /// type without `Drop`: reading it never allocates nor registers a destructor.
+    static THREAD_ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+/// The system allocator, counting each thread's allocations and reallocations.
+struct PerThreadCounting;
+
+fn count_one() {
+    // `try_with`: a thread being torn down (its locals gone) may still free or allocate.
+    let _ = THREAD_ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+#[allow(unsafe_code)]
+// SAFETY: every call is forwarded unchanged to `System`, which upholds `GlobalAlloc`'s
+// contract; the counting touches only a thread-local `Cell` and never allocates.
+unsafe impl GlobalAlloc for PerThreadCounting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count_one();
+        // SAFETY: the caller's layout contract is passed on as is.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count_one();
+        // SAFETY: as for `alloc`.
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count_one();
+        // SAFETY: `ptr` was allocated by `System` through this allocator with `layout`.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: as for `realloc`.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
 
 #[global_allocator]
-static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
+static GLOBAL: PerThreadCounting = PerThreadCounting;
+
+/// Allocations and reallocations this thread has made so far.
+fn thread_allocations() -> usize {
+    THREAD_ALLOCATIONS.with(Cell::get)
+}
 
 static SERIAL: Mutex<()> = Mutex::new(());
 
@@ -64,19 +113,15 @@ fn count_allocations(clip: Clip, semantic: bool) -> usize {
         let mut loc = Box::new(Localiser::new(&config).unwrap());
         let mut allocations = 0;
         for (i, (l, r)) in frames.iter().enumerate() {
-            let region = Region::new(GLOBAL);
+            let before = thread_allocations();
             let out = loc.process_raw(l, r, i as f64 * 0.1, network.as_mut()).unwrap();
-            let change = region.change();
+            let change = thread_allocations() - before;
             if i > 0 {
-                allocations += change.allocations + change.reallocations;
+                allocations += change;
             }
             eprintln!(
                 "frame {i}: stereo {} inliers {} kf {} culled {} allocations {}",
-                out.stereo.matched,
-                out.report.inliers,
-                out.report.keyframe,
-                out.culled,
-                change.allocations
+                out.stereo.matched, out.report.inliers, out.report.keyframe, out.culled, change
             );
             if semantic {
                 assert!(loc.labels().is_some(), "the network labelled frame {i}");
@@ -115,6 +160,26 @@ fn synthetic_frames() -> Clip {
     let frames: Vec<_> = (0..6).map(|k| synthetic_pair(w, h, k * 2)).collect();
     let cam = StereoCamera::new(718.856, 718.856, 607.19, 185.22, 0.537).unwrap();
     Clip { cam, frames, w, h }
+}
+
+/// The counter sees this thread's allocations and reallocations, and not another thread's, so a
+/// zero below means core allocated nothing rather than that nothing was counted.
+#[test]
+fn the_counter_counts_this_threads_allocations_only() {
+    let before = thread_allocations();
+    let mut v = core::hint::black_box(Vec::<u8>::with_capacity(8));
+    v.extend_from_slice(&[0; 64]);
+    assert_eq!(thread_allocations() - before, 2, "one allocation and one reallocation");
+    let before = thread_allocations();
+    let other = std::thread::spawn(|| {
+        let b = thread_allocations();
+        let v: Vec<Vec<u8>> = (0..1000).map(|i| core::hint::black_box(vec![0u8; 16 + i])).collect();
+        (thread_allocations() - b, v.len())
+    });
+    let (theirs, _) = other.join().unwrap();
+    let here = thread_allocations() - before;
+    assert!(theirs >= 1000, "the other thread counts its own: {theirs}");
+    assert!(here < 100, "{here}: spawning counts here, the other thread's allocations do not");
 }
 
 #[test]
@@ -178,13 +243,13 @@ fn segmentation_allocates_nothing() {
     let (mut input, mut labels) = (vec![0u8; 192 * 640], vec![0u8; 192 * 640]);
     let (mut arena, mut out) = (vec![0i8; arena_len], vec![0u8; w * h]);
     let lb = Letterbox::fit(w, h, 192, 640).unwrap();
-    let reg = Region::new(GLOBAL);
+    let before = thread_allocations();
     for f in &frames {
         let m = blob.model().unwrap();
         let bufs = SegBuffers { input: &mut input, arena: &mut arena, labels: &mut labels };
         segment_frame(&m, &lb, f, bufs, Kernels::Fast, &mut out).unwrap();
     }
-    let allocs = reg.change().allocations;
+    let allocs = thread_allocations() - before;
     assert!(out.iter().all(|&l| l <= 10));
     assert_eq!(allocs, 0, "{allocs} heap allocations while segmenting 3 frames");
 }
