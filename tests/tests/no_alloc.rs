@@ -69,6 +69,8 @@ fn thread_allocations() -> usize {
     THREAD_ALLOCATIONS.with(Cell::get)
 }
 
+/// The tests still run one at a time, as before the counter became per thread: each holds a
+/// localiser and the network's buffers, and one at a time bounds the peak memory.
 static SERIAL: Mutex<()> = Mutex::new(());
 
 /// The committed network the semantic path labels frames with.
