@@ -2,7 +2,7 @@
 # Smoke test of the whole Python path on one CPU thread (~1 minute): a few training iterations on
 # 8 images, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check;
 # KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
-# ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs.
+# ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from.
 # Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
 # models/requirements.txt). With a semloc binary it also quantises the rebuilt network again
 # (64 calibration images) and checks that the .slm is byte for byte the committed one.
@@ -42,6 +42,11 @@ a, b = (ort.InferenceSession(p).run(None, {'luma': x})[0]
 d = float(np.abs(a - b).max())
 assert d < 1e-4 and (a.argmax(1) == b.argmax(1)).all(), d
 print('re-exported deployed network: max|diff| %.1e, same labels' % d)"
+# Fine-tuning it: --init re-estimates the folded network's BatchNorm statistics and stops if that
+# changed its eval-mode outputs; two iterations must then train from it.
+python3 train.py --variant res2net --init $rb/deployed.pt --renorm-batches 2 --aug strong --scale 0.35 2.0 \
+  --epochs 1 --max-iters 2 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 --lr 0.003 --threads 1 \
+  --out $rb/finetune
 if [ -n "$semloc" ]; then
   python3 quantise.py --checkpoint $rb/deployed.pt --onnx $rb/fastscnn_r2_192x640.onnx --calib 64 --limit-val 4
   "$semloc" convert --onnx $rb/fastscnn_r2_192x640.onnx --quant $rb/fastscnn_r2_192x640.quant.json \

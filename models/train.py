@@ -77,7 +77,62 @@ def get_args(argv=None):
     p.add_argument("--resume", default="", help="checkpoint to start from: weights, and when it holds "
                    "them (every last.pt does) the optimiser state, epoch and iteration, so the "
                    "schedule continues where an interrupted run stopped")
+    p.add_argument("--init", default="",
+                   help="fine-tune: start from this checkpoint's weights (a fresh schedule, no optimiser "
+                   "state); its BatchNorm statistics are re-estimated on --renorm-batches training "
+                   "batches first, so that a BN-folded network (onnx_to_checkpoint.py) trains with "
+                   "normalised activations and gives the same outputs in eval mode")
+    p.add_argument("--renorm-batches", type=int, default=20)
     return p.parse_args(argv)
+
+
+@torch.no_grad()
+def renormalise_bn(model, loader, device, batches):
+    """Re-estimates every BatchNorm2d's statistics from `batches` batches of `loader` without
+    changing what the network computes in eval mode: the layer's affine map s*x + c (s =
+    weight / sqrt(running_var + eps), c = bias - s * running_mean) is re-expressed around the
+    measured mean mu and variance var of its input, weight = s * sqrt(var + eps), bias = c + s * mu.
+    A BN-folded network's BatchNorms are identities carrying the conv bias (onnx_to_checkpoint.py);
+    in training mode they would normalise by batch statistics the folded weights never saw.
+    After this, batch statistics are close to the running ones, so the first training steps
+    start from the network as it was. Returns the largest change of an eval-mode output (a check)."""
+    bns = [m for m in model.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    sums = {id(m): [0.0, 0.0, 0] for m in bns}
+
+    def hook(m, inp, _out):
+        x = inp[0].double()
+        acc = sums[id(m)]
+        acc[0] = acc[0] + x.sum(dim=(0, 2, 3))
+        acc[1] = acc[1] + (x * x).sum(dim=(0, 2, 3))
+        acc[2] += x.numel() // x.shape[1]
+
+    model.eval()
+    handles = [m.register_forward_hook(hook) for m in bns]
+    probe = None
+    for k, (x, _y) in enumerate(loader):
+        if k >= batches:
+            break
+        x = x.to(device)
+        out = model(x)
+        if probe is None:
+            probe = (x, out)
+    for h in handles:
+        h.remove()
+    if probe is None:
+        raise SystemExit("--init: the training set gave no batch to re-estimate BatchNorm on")
+    for m in bns:
+        s1, s2, n = sums[id(m)]
+        mu = s1 / n
+        var = (s2 / n - mu * mu).clamp_min(0.0)
+        s = m.weight.double() / torch.sqrt(m.running_var.double() + m.eps)
+        c = m.bias.double() - s * m.running_mean.double()
+        m.running_mean.copy_(mu.float())
+        m.running_var.copy_(var.float())
+        m.weight.copy_((s * torch.sqrt(var + m.eps)).float())
+        m.bias.copy_((c + s * mu).float())
+    err = float((model(probe[0]) - probe[1]).abs().max())
+    model.train()
+    return err
 
 
 def classmix(x, y, gen, p):
@@ -175,6 +230,18 @@ def main(argv=None):
     resume = torch.load(a.resume, map_location="cpu") if a.resume else None
     if resume is not None:
         model.load_state_dict(resume["model"])
+    if a.init:
+        if resume is not None:
+            raise SystemExit("--init and --resume: give one (--resume continues a run, --init starts one)")
+        init = torch.load(a.init, map_location="cpu")
+        if init.get("variant", a.variant) != a.variant:
+            raise SystemExit(f"--init {a.init}: a {init['variant']} checkpoint, not {a.variant}")
+        model.load_state_dict(init["model"])
+        err = renormalise_bn(model, train_dl, device, a.renorm_batches)
+        print(f"initialised from {a.init}; BatchNorm re-estimated on {a.renorm_batches} batches "
+              f"(largest eval-mode output change {err:.2e})", flush=True)
+        if not err < 1e-2:
+            raise SystemExit(f"--init {a.init}: re-estimating BatchNorm changed the outputs by {err:.3g}")
     nparams = count_params(model)
     print(f"variant={a.variant} params={nparams:,} device={device} train={len(train_ds)} val={len(val_ds)}",
           flush=True)
