@@ -4,16 +4,20 @@
 //! also the reference kernels (the logits must be bit-identical, else the command fails), and
 //! the float ONNX in tract on the same input map. Reports the pixel label agreement int8 vs
 //! f32 and, on CamVid (labels in `<split>annot/`), mIoU and category mIoU of both and the
-//! difference — the figures `models/quantise.py` estimates with its int8 simulation.
+//! difference — the figures `models/quantise.py` estimates with its int8 simulation. With
+//! `--kitti DIR --labels DIR` the same figures on labelled KITTI frames (Cityscapes label ids,
+//! as the KITTI semantic benchmark and KITTI-360 give them, or CamVid ids). Every labelled
+//! run also reports the dynamic mask's pixel precision and recall (car, pedestrian,
+//! bicyclist), what culling removes.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use image::GrayImage;
 use semloc::dataset::luma::load_luma_file;
-use semloc::nn::metrics::{Confusion, CATEGORIES};
+use semloc::nn::metrics::{map_cityscapes, Confusion, CATEGORIES};
 use semloc::nn::segment::{to_frame, Segmenter};
 use semloc::nn::tract_ref::TractRef;
 use semloc::nn::{NnFileError, SlmBlob};
@@ -43,9 +47,19 @@ pub struct VerifySegArgs {
     /// on its own. It may sit in any split; name that one with --split.
     #[arg(long, value_name = "SEQ", requires = "camvid")]
     pub sequence: Option<String>,
-    /// A KITTI sequence folder (or a folder of images): agreement only, no labels.
+    /// A KITTI sequence folder (or a folder of images): agreement, and with --labels the
+    /// scores against them.
     #[arg(long, value_name = "SEQUENCE_DIR")]
     pub kitti: Option<PathBuf>,
+    /// Label maps for the --kitti images: `<DIR>/<image stem>.png`, 8-bit label ids (e.g. the
+    /// KITTI semantic benchmark's `training/semantic/` beside `training/image_2/`). Images
+    /// without one are not scored (the count is reported); none labelled is an error.
+    #[arg(long, value_name = "DIR", requires = "kitti")]
+    pub labels: Option<PathBuf>,
+    /// The ids the --labels maps hold: Cityscapes (KITTI semantics, KITTI-360), read as the
+    /// CamVid classes (`semloc::nn::metrics::map_cityscapes`), or CamVid's own.
+    #[arg(long, value_enum, default_value = "cityscapes", requires = "labels")]
+    pub label_ids: LabelIds,
     /// Only the first N images.
     #[arg(long, value_name = "N")]
     pub limit: Option<usize>,
@@ -57,12 +71,43 @@ pub struct VerifySegArgs {
     pub json: Option<PathBuf>,
 }
 
+/// The label ids of a `--labels` folder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LabelIds {
+    /// Cityscapes ids (0-33): KITTI semantic segmentation, KITTI-360.
+    Cityscapes,
+    /// CamVid's 11 classes (0-10), anything above void.
+    Camvid,
+}
+
+impl LabelIds {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Cityscapes => "Cityscapes",
+            Self::Camvid => "CamVid",
+        }
+    }
+
+    fn to_camvid(self, id: u8) -> u8 {
+        match self {
+            Self::Cityscapes => map_cityscapes(id),
+            Self::Camvid => id.min(VOID),
+        }
+    }
+}
+
 /// mIoU figures of one engine.
 #[derive(Debug, serde::Serialize)]
 struct Scores {
     miou: f64,
     category_miou: f64,
     pixel_accuracy: f64,
+    /// Pixel precision of the dynamic mask (car, pedestrian, bicyclist); NaN (null) when
+    /// nothing was predicted dynamic.
+    dynamic_precision: f64,
+    /// Pixel recall of the dynamic mask; NaN (null) without dynamic truth.
+    dynamic_recall: f64,
     iou: std::collections::BTreeMap<&'static str, f64>,
     category_iou: std::collections::BTreeMap<&'static str, f64>,
 }
@@ -75,6 +120,8 @@ impl Scores {
             miou: c.miou(),
             category_miou: c.category_miou(),
             pixel_accuracy: c.pixel_accuracy(),
+            dynamic_precision: c.dynamic_precision(),
+            dynamic_recall: c.dynamic_recall(),
             iou: names(c.iou(), &CLASS_NAMES),
             category_iou: names(c.category_iou(), &cat_names),
         }
@@ -86,6 +133,9 @@ struct Report {
     model: PathBuf,
     onnx: PathBuf,
     images: usize,
+    /// With --labels: the ids they hold, and the images left unscored for want of a label map.
+    label_ids: Option<LabelIds>,
+    unlabelled_images: usize,
     input_hw: (usize, usize),
     letterbox_factor: f64,
     reference_checked: usize,
@@ -107,7 +157,7 @@ fn camvid_sequence(p: &Path) -> Option<&str> {
 
 /// Runs `semloc verify-seg`.
 pub fn run(args: &VerifySegArgs) -> Result<()> {
-    let (mut images, annot) = match (&args.camvid, &args.kitti) {
+    let (mut images, annot, ids) = match (&args.camvid, &args.kitti) {
         (Some(root), _) => {
             let dir = root.join(&args.split);
             let mut images = list_images(&dir)?;
@@ -117,11 +167,26 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
                     bail!("{}: no image of CamVid sequence {seq} (`{seq}_*`)", dir.display());
                 }
             }
-            (images, Some(root.join(format!("{}annot", args.split))))
+            (images, Some(root.join(format!("{}annot", args.split))), LabelIds::Camvid)
         }
-        (None, Some(k)) => (list_images(k)?, None),
+        (None, Some(k)) => (list_images(k)?, args.labels.clone(), args.label_ids),
         (None, None) => bail!("give --camvid DIR or --kitti SEQUENCE_DIR"),
     };
+    let mut unlabelled = 0;
+    if let (Some(dir), Some(_)) = (&args.labels, &args.kitti) {
+        if !dir.is_dir() {
+            bail!("{}: missing folder (--labels)", dir.display());
+        }
+        let n = images.len();
+        images.retain(|p| label_path(dir, p).is_file());
+        unlabelled = n - images.len();
+        if images.is_empty() {
+            bail!(
+                "{}: no label map for any of the {n} images (`<image stem>.png` expected)",
+                dir.display()
+            );
+        }
+    }
     if let Some(n) = args.limit {
         images.truncate(n);
     }
@@ -163,7 +228,7 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
         same += s;
         total += f32_frame.len() as u64;
         if let Some(dir) = &annot {
-            let truth = load_truth(dir, path, w, h)?;
+            let truth = load_truth(dir, path, w, h, ids)?;
             c8.add(truth.as_raw(), &labels.frame);
             c32.add(truth.as_raw(), &f32_frame);
         }
@@ -176,6 +241,8 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
         model: args.model.clone(),
         onnx: args.onnx.clone(),
         images: images.len(),
+        label_ids: args.labels.is_some().then_some(ids),
+        unlabelled_images: unlabelled,
         input_hw: seg.input_size(),
         letterbox_factor: factor,
         reference_checked: args.reference_check.min(images.len()),
@@ -199,11 +266,16 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
     Ok(())
 }
 
-/// The CamVid label map of `image` (`<annot>/<stem>.png`, 8-bit class ids, ids > 11 read as
-/// void, as `camvid.py`).
-fn load_truth(annot: &Path, image: &Path, w: u32, h: u32) -> Result<GrayImage> {
+/// Where the label map of `image` is: `<dir>/<image stem>.png`.
+fn label_path(dir: &Path, image: &Path) -> PathBuf {
     let stem = image.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
-    let p = annot.join(format!("{stem}.png"));
+    dir.join(format!("{stem}.png"))
+}
+
+/// The label map of `image` (`<annot>/<stem>.png`, 8-bit ids) as CamVid classes: CamVid ids
+/// above 11 read as void, as `camvid.py`; Cityscapes ids mapped by [`map_cityscapes`].
+fn load_truth(annot: &Path, image: &Path, w: u32, h: u32, ids: LabelIds) -> Result<GrayImage> {
+    let p = label_path(annot, image);
     let img = image::open(&p).map_err(|e| match e {
         image::ImageError::IoError(io) => anyhow::Error::new(NnFileError::io(&p, &io)),
         e => anyhow::anyhow!("{}: cannot decode labels: {e}", p.display()),
@@ -215,12 +287,20 @@ fn load_truth(annot: &Path, image: &Path, w: u32, h: u32) -> Result<GrayImage> {
         bail!("{}: labels are {:?}, the image {w}x{h}", p.display(), g.dimensions());
     }
     for v in g.iter_mut() {
-        *v = (*v).min(VOID);
+        *v = ids.to_camvid(*v);
     }
     Ok(g)
 }
 
 fn print_report(r: &Report) {
+    if let Some(ids) = r.label_ids {
+        println!(
+            "labels: {} ids; {} images scored, {} without a label map left out",
+            ids.name(),
+            r.images,
+            r.unlabelled_images
+        );
+    }
     println!(
         "{} images, model input {}x{} (letterbox factor {}), fast = reference kernels on the \
          first {} (bit-identical)",
@@ -248,6 +328,14 @@ fn print_report(r: &Report) {
             100.0 * a.category_miou,
             100.0 * b.category_miou,
             100.0 * (b.category_miou - a.category_miou)
+        );
+        println!(
+            "dynamic mask (car, pedestrian, bicyclist) pixel precision / recall: int8 {:.2} / \
+             {:.2} %, f32 {:.2} / {:.2} %",
+            100.0 * a.dynamic_precision,
+            100.0 * a.dynamic_recall,
+            100.0 * b.dynamic_precision,
+            100.0 * b.dynamic_recall
         );
     }
 }

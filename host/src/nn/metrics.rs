@@ -3,11 +3,14 @@
 //! `tp / (tp + fp + fn)` (NaN where a class is absent from truth and prediction), mIoU as the
 //! mean over the non-NaN classes, and the paper's category mIoU from the class matrix merged
 //! into the categories human {9, 10}, vehicle {8}, construction {1, 7}, object {2, 6},
-//! flat {3, 4}, nature {5}, sky {0}.
+//! flat {3, 4}, nature {5}, sky {0}; and the pixel precision and recall of the dynamic mask
+//! (car, pedestrian, bicyclist: what culling removes), as `camvid.py`'s `dyn_precision` /
+//! `dyn_recall`. [`map_cityscapes`] reads Cityscapes label ids (KITTI semantics, KITTI-360) as
+//! these classes.
 //!
 //! Memory: an 11 x 11 `u64` matrix.
 
-use semloc_core::seg::NUM_CLASSES;
+use semloc_core::seg::{is_dynamic, NUM_CLASSES, VOID};
 
 /// Category names and their classes, in `camvid.py`'s order.
 pub const CATEGORIES: [(&str, &[u8]); 7] = [
@@ -68,11 +71,63 @@ impl Confusion {
         nanmean(&self.category_iou())
     }
 
+    /// Of the pixels predicted dynamic (car, pedestrian, bicyclist) with labelled truth, the
+    /// share whose truth is dynamic too (any of the three); NaN when none was predicted.
+    pub fn dynamic_precision(&self) -> f64 {
+        let (tp, pred, _) = self.dynamic_counts();
+        tp as f64 / pred as f64
+    }
+
+    /// Of the dynamic truth pixels, the share predicted dynamic; NaN when there are none.
+    pub fn dynamic_recall(&self) -> f64 {
+        let (tp, _, truth) = self.dynamic_counts();
+        tp as f64 / truth as f64
+    }
+
+    /// (dynamic truth and prediction, dynamic prediction, dynamic truth) pixel counts.
+    fn dynamic_counts(&self) -> (u64, u64, u64) {
+        let (mut tp, mut pred, mut truth) = (0, 0, 0);
+        for (t, row) in self.m.iter().enumerate() {
+            for (p, &n) in row.iter().enumerate() {
+                let (dt, dp) = (is_dynamic(t as u8), is_dynamic(p as u8));
+                tp += if dt && dp { n } else { 0 };
+                pred += if dp { n } else { 0 };
+                truth += if dt { n } else { 0 };
+            }
+        }
+        (tp, pred, truth)
+    }
+
     /// Fraction of counted pixels labelled right.
     pub fn pixel_accuracy(&self) -> f64 {
         let total: u64 = self.m.iter().flatten().sum();
         let tp: u64 = (0..NUM_CLASSES).map(|i| self.m[i][i]).sum();
         tp as f64 / total.max(1) as f64
+    }
+}
+
+/// The CamVid class (or [`VOID`]) of a Cityscapes label id, the ids of the KITTI semantic
+/// segmentation benchmark and of KITTI-360 (`semantic/*.png`), mapped as the SegNet CamVid
+/// classes merge CamVid's 32: wall, bridge and tunnel are building; guard rail is fence;
+/// pole group is pole; traffic light and sign are sign-symbol; terrain (grass, soil) is tree,
+/// as CamVid's "VegetationMisc"; truck, bus, caravan, trailer and train are car; rider,
+/// motorcycle and bicycle are bicyclist. Void: unlabelled, ego vehicle, rectification border,
+/// out of ROI, "static" and "dynamic" (unclassified objects), ground, parking, rail track and
+/// any other id (license plate, 255).
+pub const fn map_cityscapes(id: u8) -> u8 {
+    match id {
+        23 => 0,
+        11 | 12 | 15 | 16 => 1,
+        17 | 18 => 2,
+        7 => 3,
+        8 => 4,
+        21 | 22 => 5,
+        19 | 20 => 6,
+        13 | 14 => 7,
+        26..=31 => 8,
+        24 => 9,
+        25 | 32 | 33 => 10,
+        _ => VOID,
     }
 }
 
@@ -123,5 +178,67 @@ mod tests {
         assert!((ci[4] - 2.0 / 3.0).abs() < 1e-12);
         assert!((c.category_miou() - (0.5 + 2.0 / 3.0) / 2.0).abs() < 1e-12);
         assert_eq!(c.pixel_accuracy(), 0.5);
+        // dynamic mask: one pixel predicted car on void truth (not counted), none on truth
+        assert!(c.dynamic_precision().is_nan() && c.dynamic_recall().is_nan());
+    }
+
+    #[test]
+    fn dynamic_mask_precision_and_recall_by_hand() {
+        let mut c = Confusion::default();
+        // truth: car, car, pedestrian, bicyclist, road, tree, void
+        // pred:  car, road, bicyclist, pedestrian, car, car, car
+        c.add(&[8, 8, 9, 10, 3, 5, 11], &[8, 3, 10, 9, 8, 8, 8]);
+        // predicted dynamic on labelled truth: 5 (car, bicyclist, pedestrian, car, car), of
+        // which 3 dynamic in truth (a pedestrian called bicyclist still counts); truth dynamic 4
+        assert!((c.dynamic_precision() - 3.0 / 5.0).abs() < 1e-12);
+        assert!((c.dynamic_recall() - 3.0 / 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn cityscapes_ids_map_to_camvid_classes() {
+        let pairs = [
+            (0, VOID),
+            (1, VOID),
+            (3, VOID),
+            (4, VOID),
+            (5, VOID),
+            (6, VOID),
+            (7, 3),
+            (8, 4),
+            (9, VOID),
+            (10, VOID),
+            (11, 1),
+            (12, 1),
+            (13, 7),
+            (14, 7),
+            (15, 1),
+            (16, 1),
+            (17, 2),
+            (18, 2),
+            (19, 6),
+            (20, 6),
+            (21, 5),
+            (22, 5),
+            (23, 0),
+            (24, 9),
+            (25, 10),
+            (26, 8),
+            (27, 8),
+            (28, 8),
+            (29, 8),
+            (30, 8),
+            (31, 8),
+            (32, 10),
+            (33, 10),
+            (34, VOID),
+            (255, VOID),
+        ];
+        for (id, class) in pairs {
+            assert_eq!(map_cityscapes(id), class, "Cityscapes id {id}");
+        }
+        // the dynamic classes of one are the dynamic classes of the other: person to bicycle
+        for id in 0..=255u8 {
+            assert_eq!(is_dynamic(map_cityscapes(id)), (24..=33).contains(&id), "id {id}");
+        }
     }
 }

@@ -142,3 +142,81 @@ fn verify_seg_scores_a_camvid_layout_and_checks_kernels() {
     assert_eq!(o.status.code(), Some(1));
     assert!(text(&o).contains("valannot/b.png: missing file"), "{}", text(&o));
 }
+
+#[test]
+fn verify_seg_scores_labelled_kitti_frames_in_cityscapes_or_camvid_ids() {
+    let dir = tempfile::tempdir().unwrap();
+    let (onnx, slm) = tiny_model(dir.path());
+    let (images, cs, cv) =
+        (dir.path().join("image_2"), dir.path().join("cs"), dir.path().join("cv"));
+    for d in [&images, &cs, &cv] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    // Three images, two labelled: the same map in Cityscapes ids (sky 23, building 11, pole
+    // 17, and 0 unlabelled) and in CamVid ids (0, 1, 2, void 11).
+    for (i, name) in ["000000_10", "000001_10", "000002_10"].iter().enumerate() {
+        write_image(&images.join(format!("{name}.png")), 30, 20);
+        if i == 2 {
+            continue;
+        }
+        let pick = |x: u32, ids: [u8; 4]| image::Luma([ids[(x % 4) as usize]]);
+        image::GrayImage::from_fn(30, 20, |x, _| pick(x, [23, 11, 17, 0]))
+            .save(cs.join(format!("{name}.png")))
+            .unwrap();
+        image::GrayImage::from_fn(30, 20, |x, _| pick(x, [0, 1, 2, 11]))
+            .save(cv.join(format!("{name}.png")))
+            .unwrap();
+    }
+    let score = |labels: &Path, extra: &[&str]| {
+        let json = dir.path().join("v.json");
+        let mut a = vec!["verify-seg", "--model", s(&slm), "--onnx", s(&onnx), "--kitti"];
+        a.extend([s(&images), "--labels", s(labels), "--json", s(&json)]);
+        a.extend(extra);
+        let o = semloc(&a);
+        assert!(o.status.success(), "{}", text(&o));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        (text(&o), v)
+    };
+    let (t, a) = score(&cs, &[]);
+    assert!(t.contains("labels: Cityscapes ids; 2 images scored, 1 without a label map"), "{t}");
+    assert!(
+        t.contains("dynamic mask (car, pedestrian, bicyclist) pixel precision / recall"),
+        "{t}"
+    );
+    assert_eq!(a["images"], 2);
+    assert_eq!(a["unlabelled_images"], 1);
+    assert_eq!(a["label_ids"], "cityscapes");
+    // the 3-class net predicts nothing dynamic and the truth holds nothing dynamic: no figure
+    assert!(a["int8"]["dynamic_precision"].is_null() && a["int8"]["dynamic_recall"].is_null());
+    let (_, b) = score(&cv, &["--label-ids", "camvid"]);
+    assert_eq!(b["label_ids"], "camvid");
+    for k in ["miou", "category_miou", "pixel_accuracy", "iou"] {
+        assert_eq!(a["int8"][k], b["int8"][k], "{k}: Cityscapes and CamVid ids of one map");
+        assert_eq!(a["f32"][k], b["f32"][k], "{k}");
+    }
+    assert!(a["int8"]["miou"].as_f64().unwrap() > 0.0);
+
+    // A run that must fail with exit 1 and name what is wrong.
+    let refused = |labels: &Path, want: &str| {
+        let mut a = vec!["verify-seg", "--model", s(&slm), "--onnx", s(&onnx), "--kitti"];
+        a.extend([s(&images), "--labels", s(labels)]);
+        let o = semloc(&a);
+        assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+        assert!(text(&o).contains(want), "missing {want:?} in:\n{}", text(&o));
+    };
+    // no label map for any image, or no folder at all: the folder is named
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    refused(&empty, &format!("{}: no label map for any of the 3 images", empty.display()));
+    let gone = dir.path().join("gone");
+    refused(&gone, &format!("{}: missing folder", gone.display()));
+    // a colour label map (KITTI's semantic_rgb/) is refused by name
+    let rgb = image::RgbImage::from_pixel(30, 20, image::Rgb([128, 64, 128]));
+    rgb.save(cs.join("000000_10.png")).unwrap();
+    refused(&cs, "000000_10.png: labels must be 8-bit grey class ids");
+
+    // --labels needs --kitti
+    let o = semloc(&["verify-seg", "--model", s(&slm), "--onnx", s(&onnx), "--labels", s(&cs)]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+}
