@@ -157,6 +157,7 @@ fn camvid_sequence(p: &Path) -> Option<&str> {
 
 /// Runs `semloc verify-seg`.
 pub fn run(args: &VerifySegArgs) -> Result<()> {
+    let mut unlabelled = 0;
     let (mut images, annot, ids) = match (&args.camvid, &args.kitti) {
         (Some(root), _) => {
             let dir = root.join(&args.split);
@@ -169,24 +170,26 @@ pub fn run(args: &VerifySegArgs) -> Result<()> {
             }
             (images, Some(root.join(format!("{}annot", args.split))), LabelIds::Camvid)
         }
-        (None, Some(k)) => (list_images(k)?, args.labels.clone(), args.label_ids),
+        (None, Some(k)) => {
+            let mut images = list_images(k)?;
+            if let Some(dir) = &args.labels {
+                if !dir.is_dir() {
+                    bail!("{}: missing folder (--labels)", dir.display());
+                }
+                let n = images.len();
+                images.retain(|p| label_path(dir, p).is_file());
+                unlabelled = n - images.len();
+                if images.is_empty() {
+                    bail!(
+                        "{}: no label map for any of the {n} images (`<image stem>.png` expected)",
+                        dir.display()
+                    );
+                }
+            }
+            (images, args.labels.clone(), args.label_ids)
+        }
         (None, None) => bail!("give --camvid DIR or --kitti SEQUENCE_DIR"),
     };
-    let mut unlabelled = 0;
-    if let (Some(dir), Some(_)) = (&args.labels, &args.kitti) {
-        if !dir.is_dir() {
-            bail!("{}: missing folder (--labels)", dir.display());
-        }
-        let n = images.len();
-        images.retain(|p| label_path(dir, p).is_file());
-        unlabelled = n - images.len();
-        if images.is_empty() {
-            bail!(
-                "{}: no label map for any of the {n} images (`<image stem>.png` expected)",
-                dir.display()
-            );
-        }
-    }
     if let Some(n) = args.limit {
         images.truncate(n);
     }
