@@ -185,6 +185,17 @@ pub struct MotionReport {
     pub unproven_features: u32,
 }
 
+/// The object (segment) a dynamic-class feature was grouped into by the last motion test
+/// ([`crate::tracker::Tracker::feature_segment`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MotionSegment {
+    /// The segment's id on this frame: the index of one of its features (the same for all).
+    pub id: u16,
+    /// The segment's features measured on this frame (against a landmark, frame to frame or
+    /// by the depthless test): its evidence, consistent and inconsistent together.
+    pub measured: u32,
+}
+
 /// Most dynamic-class features of the previous frame the frame-to-frame test remembers.
 pub const PREV_CAPACITY: usize = 1024;
 
@@ -797,6 +808,21 @@ impl MotionScratch {
         }
     }
 
+    /// The segment of feature `i` after the last [`Self::decide`] (`None` for a static-class
+    /// feature, or when no motion test ran on the frame). Read-only: follows the parent links
+    /// without compressing them.
+    pub fn segment_of(&self, i: usize) -> Option<MotionSegment> {
+        if self.state.get(i).is_none_or(|&st| st == FeatureMotion::Static) {
+            return None;
+        }
+        let mut r = i;
+        while usize::from(self.parent[r]) != r {
+            r = usize::from(self.parent[r]);
+        }
+        let measured = u32::from(self.n_ok[r]) + u32::from(self.n_bad[r]);
+        Some(MotionSegment { id: r as u16, measured })
+    }
+
     /// Whether feature `i` has a match (to a landmark, or frame to frame) measured at the
     /// solved pose.
     fn measured(&self, i: usize) -> bool {
@@ -1032,6 +1058,17 @@ mod tests {
         assert!(lo[..5].iter().all(|&l| (l + 2.0 * p.max_frame_llr).abs() < 1e-6));
         assert!(lo[5..10].iter().all(|&l| (l - 2.0 * p.max_frame_llr).abs() < 1e-6));
         assert_eq!(s.cand[12], NO_LANDMARK);
+        // The objects as `segment_of` reports them: one id per object, its measured features.
+        let seg: std::vec::Vec<MotionSegment> =
+            (0..13).map(|i| s.segment_of(i).expect("dynamic class")).collect();
+        for (range, measured) in [(0..5, 5), (5..10, 5), (10..13, 0)] {
+            let id = seg[range.start].id;
+            assert!(seg[range].iter().all(|g| g.id == id && g.measured == measured));
+        }
+        assert!(seg[0].id != seg[5].id && seg[5].id != seg[10].id && seg[0].id != seg[10].id);
+        assert_eq!(s.segment_of(13), None, "beyond the frame's features");
+        s.reset(feats.len());
+        assert_eq!(s.segment_of(0), None, "no motion test on this frame yet");
     }
 
     /// Two matched features are not enough to call a car parked; one inconsistent match in a

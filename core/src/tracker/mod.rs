@@ -33,8 +33,8 @@ use crate::map::{
     measurement, renormalize, LocalMap, LocalSet, Map, MappingParams, NewKeyframe, NO_LANDMARK,
 };
 use crate::motion::{
-    FeatureMotion, MotionParams, MotionReport, MotionScratch, MAX_LANDMARK_LOGIT, MOVING_LOGIT,
-    STATIC_LOGIT,
+    FeatureMotion, MotionParams, MotionReport, MotionScratch, MotionSegment, MAX_LANDMARK_LOGIT,
+    MOVING_LOGIT, STATIC_LOGIT,
 };
 use crate::optim::{chi2, PoseOptParams};
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
@@ -383,6 +383,17 @@ impl Tracker {
     /// [`FeatureMotion::Static`] when motion-aware semantics are off).
     pub fn feature_motion(&self) -> &[FeatureMotion] {
         &self.motion.state[..self.last_features.min(FRAME_CAPACITY)]
+    }
+
+    /// The object the motion test grouped feature `i` of the last processed frame into, and
+    /// how many of that object's features it measured (`None` for static-class features, and
+    /// for every feature when motion-aware semantics are off or the frame was not tracked).
+    /// Features with the same [`MotionSegment::id`] were decided together.
+    pub fn feature_segment(&self, i: usize) -> Option<MotionSegment> {
+        if i >= self.last_features.min(FRAME_CAPACITY) {
+            return None;
+        }
+        self.motion.segment_of(i)
     }
 
     /// How each feature of the last processed frame served its pose: writes the first

@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use semloc::dataset::Sequence;
 use semloc::pipeline::{CategoryCounts, Pipeline};
-use semloc::run::{association_name, Network, RunConfig, RunResult, Semantics};
+use semloc::run::{association_name, MovingCheck, Network, RunConfig, RunResult, Semantics};
 use semloc_core::assoc::Association;
 use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
@@ -339,6 +339,32 @@ pub fn table(rows: &[Row]) -> String {
                 (_, None) => format!("{:>22}", "n/a"),
             },
         );
+    }
+    let causes: Vec<(&Row, &MovingCheck)> = rows
+        .iter()
+        .filter_map(|r| Some((r, r.outcome.summary.motion.as_ref()?.moving_check.as_ref()?)))
+        .filter(|(_, c)| c.false_pos > 0)
+        .collect();
+    if !causes.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nwrongly removed features (on no moving object), by cause: joined to a moving \
+             object / parked object tested moving / measured, evidence pending / not yet measured"
+        );
+        for (r, c) in causes {
+            let pct = |v: u32| 100.0 * f64::from(v) / f64::from(c.false_pos);
+            let _ = writeln!(
+                s,
+                "  {} / {}: {} features: {:.0} / {:.0} / {:.0} / {:.0} %",
+                r.semantics.name(),
+                association_name(r.assoc),
+                c.false_pos,
+                pct(c.false_pos_joined),
+                pct(c.false_pos_tested),
+                pct(c.false_pos_pending),
+                pct(c.false_pos_unseen),
+            );
+        }
     }
     if seeds >= 2 {
         let _ = writeln!(

@@ -24,8 +24,9 @@ pub mod viewer;
 use std::path::{Path, PathBuf};
 
 use semloc_core::assoc::Association;
+use semloc_core::frame::Feature;
 use semloc_core::geom::Se3;
-use semloc_core::motion::FeatureMotion;
+use semloc_core::motion::{FeatureMotion, MotionSegment};
 use semloc_core::nn::graph::Letterbox;
 use semloc_core::orb::OrbConfig;
 use semloc_core::seg::WeightScheme;
@@ -185,6 +186,11 @@ pub struct FrameRecord {
 /// One frame's features scored against the ground-truth moving-object mask: "called moving"
 /// is a feature the motion test removed (moving or unproven, [`FeatureMotion::removed`]); a
 /// feature is truly moving when the mask is set at its key point.
+///
+/// The wrongly removed features (`false_pos`) are split by why they were removed, from the
+/// object the motion test grouped them into ([`semloc_core::tracker::Tracker::feature_segment`]):
+/// `false_pos_joined` + `false_pos_tested` + `false_pos_pending` + `false_pos_unseen` =
+/// `false_pos`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct MovingCheck {
     /// Removed and on a moving object.
@@ -199,6 +205,17 @@ pub struct MovingCheck {
     pub tested_moving_true: u32,
     /// Used as parked (tested static) but on a moving object.
     pub tested_parked_moving: u32,
+    /// Of `false_pos`: grouped into one object with features on a moving object (a parked car
+    /// joined to the one passing it), which decided for all of them.
+    pub false_pos_joined: u32,
+    /// Of `false_pos`: on an object none of whose features moves, tested moving.
+    pub false_pos_tested: u32,
+    /// Of `false_pos`: on such an object, measured but without enough evidence yet to be
+    /// called parked (unproven).
+    pub false_pos_pending: u32,
+    /// Of `false_pos`: on such an object, none of whose features could be measured on this
+    /// frame (seen for the first time, or nothing re-found): unproven.
+    pub false_pos_unseen: u32,
 }
 
 impl MovingCheck {
@@ -210,6 +227,10 @@ impl MovingCheck {
         self.tested_moving += o.tested_moving;
         self.tested_moving_true += o.tested_moving_true;
         self.tested_parked_moving += o.tested_parked_moving;
+        self.false_pos_joined += o.false_pos_joined;
+        self.false_pos_tested += o.false_pos_tested;
+        self.false_pos_pending += o.false_pos_pending;
+        self.false_pos_unseen += o.false_pos_unseen;
     }
     /// Precision of "called moving" (NaN when nothing was called moving).
     pub fn precision(&self) -> f64 {
@@ -233,27 +254,69 @@ impl MovingCheck {
 
 /// Scores the last tracked frame's features against `mask` (see [`MovingCheck`]).
 pub fn moving_check(pipe: &Pipeline, mask: &GrayImage) -> MovingCheck {
-    let feats = &pipe.localiser().frame().features;
-    let states = pipe.tracker().feature_motion();
+    let tracker = pipe.tracker();
+    score_moving(
+        &pipe.localiser().frame().features,
+        tracker.feature_motion(),
+        |i| tracker.feature_segment(i),
+        mask,
+    )
+}
+
+/// [`moving_check`] on its parts: each feature, what the motion test made of it and the object
+/// it grouped it into.
+fn score_moving(
+    feats: &[Feature],
+    states: &[FeatureMotion],
+    segment: impl Fn(usize) -> Option<MotionSegment>,
+    mask: &GrayImage,
+) -> MovingCheck {
+    let n = feats.len().min(states.len());
+    let truth: Vec<bool> = feats[..n]
+        .iter()
+        .map(|f| {
+            let x = (f.x.round().max(0.0) as u32).min(mask.width() - 1);
+            let y = (f.y.round().max(0.0) as u32).min(mask.height() - 1);
+            mask.get_pixel(x, y).0[0] != 0
+        })
+        .collect();
+    // Objects with at least one feature on a moving object.
+    let mut has_moving = vec![false; n];
+    for (i, _) in truth.iter().enumerate().filter(|(_, &t)| t) {
+        if let Some(s) = segment(i) {
+            if let Some(m) = has_moving.get_mut(usize::from(s.id)) {
+                *m = true;
+            }
+        }
+    }
     let mut c = MovingCheck::default();
-    for (f, st) in feats.iter().zip(states.iter()) {
-        let (x, y) = (
-            (f.x.round() as u32).min(mask.width() - 1),
-            (f.y.round() as u32).min(mask.height() - 1),
-        );
-        let truth = mask.get_pixel(x, y).0[0] != 0;
-        let called = st.removed();
-        match (called, truth) {
+    for i in 0..n {
+        let (st, truth) = (states[i], truth[i]);
+        match (st.removed(), truth) {
             (true, true) => c.true_pos += 1,
-            (true, false) => c.false_pos += 1,
+            (true, false) => {
+                c.false_pos += 1;
+                let seg = segment(i);
+                let joined = seg
+                    .is_some_and(|s| has_moving.get(usize::from(s.id)).copied().unwrap_or(false));
+                if joined {
+                    c.false_pos_joined += 1;
+                } else if st == FeatureMotion::Moving {
+                    c.false_pos_tested += 1;
+                } else if seg.is_some_and(|s| s.measured > 0) {
+                    c.false_pos_pending += 1;
+                } else {
+                    c.false_pos_unseen += 1;
+                }
+            }
             (false, true) => c.false_neg += 1,
             _ => {}
         }
-        if *st == FeatureMotion::Moving {
+        if st == FeatureMotion::Moving {
             c.tested_moving += 1;
             c.tested_moving_true += u32::from(truth);
         }
-        if *st == FeatureMotion::Parked {
+        if st == FeatureMotion::Parked {
             c.tested_parked_moving += u32::from(truth);
         }
     }
@@ -798,4 +861,49 @@ pub fn run_observed(
         (f, Ok(())) => f,
     };
     Ok(RunResult { frames, summary, eval, failure, eval_error, warnings, notices, summary_written })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::Luma;
+
+    fn feat(x: f32, y: f32) -> Feature {
+        Feature { x, y, level: 0, angle: 0.0, desc: [0; 32], ur: -1.0, depth_m: 0.0, class: 8 }
+    }
+
+    /// Each wrongly removed feature lands in exactly one cause, from its object: joined to a
+    /// moving one, tested moving, pending (measured, unproven) or unseen (unmeasured).
+    #[test]
+    fn wrongly_removed_features_are_split_by_cause() {
+        use FeatureMotion::*;
+        // The mask marks x < 10 as moving.
+        let mask = GrayImage::from_fn(40, 10, |x, _| Luma([if x < 10 { 255 } else { 0 }]));
+        type Case = (f32, FeatureMotion, Option<(u16, u32)>);
+        let cases: [Case; 10] = [
+            (2.0, Moving, Some((0, 5))),    // true positive of object 0
+            (12.0, Moving, Some((0, 5))),   // static, joined to object 0: joined
+            (14.0, Moving, Some((2, 4))),   // static object 2 tested moving
+            (16.0, Unproven, Some((3, 2))), // static object 3, measured, unproven: pending
+            (18.0, Unproven, Some((4, 0))), // static object 4, nothing measured: unseen
+            (20.0, Parked, Some((5, 6))),   // kept, static: not counted
+            (4.0, Parked, Some((6, 6))),    // kept, moving: false negative
+            (6.0, Unproven, Some((7, 0))),  // removed, moving: true positive
+            (30.0, Static, None),           // static class: not counted
+            (8.0, Static, None),            // static class on the mask: false negative
+        ];
+        let feats: Vec<Feature> = cases.iter().map(|c| feat(c.0, 5.0)).collect();
+        let states: Vec<FeatureMotion> = cases.iter().map(|c| c.1).collect();
+        let seg = |i: usize| cases[i].2.map(|(id, measured)| MotionSegment { id, measured });
+        let c = score_moving(&feats, &states, seg, &mask);
+        assert_eq!((c.true_pos, c.false_pos, c.false_neg), (2, 4, 2));
+        assert_eq!(
+            (c.false_pos_joined, c.false_pos_tested, c.false_pos_pending, c.false_pos_unseen),
+            (1, 1, 1, 1)
+        );
+        assert_eq!((c.tested_moving, c.tested_moving_true, c.tested_parked_moving), (3, 1, 1));
+        let mut sum = c;
+        sum.add(&c);
+        assert_eq!((sum.false_pos, sum.false_pos_joined, sum.false_pos_unseen), (8, 2, 2));
+    }
 }

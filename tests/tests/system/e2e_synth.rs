@@ -204,6 +204,14 @@ fn motion_aware_semantics_find_the_moving_traffic() {
     // on `high` seeds 1-4 (100 frames, hard and EM alike), where the removed features'
     // precision is 0.83-0.92.
     assert!(tested_p >= 0.9, "of the features tested moving only {tested_p:.3} move");
+    // Every wrongly removed feature has exactly one cause.
+    let causes = [c.false_pos_joined, c.false_pos_tested, c.false_pos_pending, c.false_pos_unseen];
+    eprintln!(
+        "high: wrongly removed features joined / tested / pending / unseen: {causes:?} of {}",
+        c.false_pos
+    );
+    assert_eq!(causes.iter().sum::<u32>(), c.false_pos);
+    assert!(causes.iter().all(|&k| k > 0), "{causes:?}");
     assert_eq!(lost, 0);
 }
 
