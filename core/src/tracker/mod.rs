@@ -385,6 +385,16 @@ impl Tracker {
         &self.motion.state[..self.last_features.min(FRAME_CAPACITY)]
     }
 
+    /// Which features of the last processed frame the motion test kept from making a landmark
+    /// (moving ones, and unproven ones matched to the landmark they would duplicate); all
+    /// `false` when motion-aware semantics are off. An unproven feature matched to no landmark
+    /// is not blocked: it had no match to hold out of the pose, and the landmark it may make is
+    /// tested like any other dynamic-class landmark before it is used, so it is treated exactly
+    /// as a parked car's feature would be.
+    pub fn feature_blocked(&self) -> &[bool] {
+        &self.motion.blocked[..self.last_features.min(FRAME_CAPACITY)]
+    }
+
     /// The object the motion test grouped feature `i` of the last processed frame into, and
     /// how many of that object's features it measured (`None` for static-class features, and
     /// for every feature when motion-aware semantics are off or the frame was not tracked).

@@ -139,6 +139,10 @@ struct JsonRow<'a> {
     /// sequence's moving-object mask (synthetic sequences), else null.
     moving_precision: Option<f64>,
     moving_recall: Option<f64>,
+    /// The same for the withheld features (removed less the deferred: unproven and matched to
+    /// no landmark, which are treated as parked ones are).
+    withheld_precision: Option<f64>,
+    withheld_recall: Option<f64>,
     /// The same for the "moving" verdict alone (unproven features left out).
     tested_moving_precision: Option<f64>,
     tested_moving_recall: Option<f64>,
@@ -340,11 +344,36 @@ pub fn table(rows: &[Row]) -> String {
             },
         );
     }
-    let causes: Vec<(&Row, &MovingCheck)> = rows
+    let checks: Vec<(&Row, &MovingCheck)> = rows
         .iter()
         .filter_map(|r| Some((r, r.outcome.summary.motion.as_ref()?.moving_check.as_ref()?)))
-        .filter(|(_, c)| c.false_pos > 0)
         .collect();
+    if !checks.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nmoving features, precision / recall [%]: removed (moving or unproven) / withheld \
+             from pose or map (unproven features matched to no landmark count as kept) / tested \
+             moving"
+        );
+        for (r, c) in &checks {
+            let pr = |p: f64, q: f64| {
+                let f =
+                    |v: f64| if v.is_finite() { format!("{:.1}", 100.0 * v) } else { "n/a".into() };
+                format!("{} / {}", f(p), f(q))
+            };
+            let _ = writeln!(
+                s,
+                "  {} / {}: {}  |  {}  |  {}",
+                r.semantics.name(),
+                association_name(r.assoc),
+                pr(c.precision(), c.recall()),
+                pr(c.withheld_precision(), c.withheld_recall()),
+                pr(c.tested_precision(), c.tested_recall()),
+            );
+        }
+    }
+    let causes: Vec<(&Row, &MovingCheck)> =
+        checks.into_iter().filter(|(_, c)| c.false_pos > 0).collect();
     if !causes.is_empty() {
         let _ = writeln!(
             s,
@@ -640,6 +669,8 @@ pub fn run(args: &AblateArgs) -> Result<()> {
                 em_changed_total: r.outcome.summary.em_changed_total,
                 moving_precision: motion.and_then(|m| m.moving_precision),
                 moving_recall: motion.and_then(|m| m.moving_recall),
+                withheld_precision: motion.and_then(|m| m.withheld_precision),
+                withheld_recall: motion.and_then(|m| m.withheld_recall),
                 tested_moving_precision: motion.and_then(|m| m.tested_moving_precision),
                 tested_moving_recall: motion.and_then(|m| m.tested_moving_recall),
                 ate_rmse_m_seeds: &r.seed_ates,

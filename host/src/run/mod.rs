@@ -187,6 +187,12 @@ pub struct FrameRecord {
 /// is a feature the motion test removed (moving or unproven, [`FeatureMotion::removed`]); a
 /// feature is truly moving when the mask is set at its key point.
 ///
+/// Of the removed features, the *deferred* ones (unproven and matched to no landmark) are
+/// treated as a parked car's features are: they had no match to hold out of the pose and may
+/// make a landmark, which is tested before it is used. Counting them as kept gives the
+/// precision and recall of what the motion test actually withholds from the pose and the
+/// map ([`MovingCheck::withheld_precision`]).
+///
 /// The wrongly removed features (`false_pos`) are split by why they were removed, from the
 /// object the motion test grouped them into ([`semloc_core::tracker::Tracker::feature_segment`]):
 /// `false_pos_joined` + `false_pos_tested` + `false_pos_pending` + `false_pos_unseen` =
@@ -216,6 +222,11 @@ pub struct MovingCheck {
     /// Of `false_pos`: on such an object, none of whose features could be measured on this
     /// frame (seen for the first time, or nothing re-found): unproven.
     pub false_pos_unseen: u32,
+    /// Of `true_pos + false_pos`: unproven and matched to no landmark, so neither held out of
+    /// the pose nor kept from making a landmark ([`semloc_core::tracker::Tracker::feature_blocked`]).
+    pub deferred: u32,
+    /// Of `deferred`, on a moving object.
+    pub deferred_true: u32,
 }
 
 impl MovingCheck {
@@ -231,6 +242,8 @@ impl MovingCheck {
         self.false_pos_tested += o.false_pos_tested;
         self.false_pos_pending += o.false_pos_pending;
         self.false_pos_unseen += o.false_pos_unseen;
+        self.deferred += o.deferred;
+        self.deferred_true += o.deferred_true;
     }
     /// Precision of "called moving" (NaN when nothing was called moving).
     pub fn precision(&self) -> f64 {
@@ -239,6 +252,17 @@ impl MovingCheck {
     /// Recall of the moving features (NaN when none moved).
     pub fn recall(&self) -> f64 {
         f64::from(self.true_pos) / f64::from(self.true_pos + self.false_neg)
+    }
+    /// Precision of "withheld": of the features kept out of the pose or the map (removed, not
+    /// deferred), the share on moving objects (NaN when none was).
+    pub fn withheld_precision(&self) -> f64 {
+        f64::from(self.true_pos - self.deferred_true)
+            / f64::from(self.true_pos + self.false_pos - self.deferred)
+    }
+    /// Recall of "withheld": of the features on moving objects, the share kept out of the pose
+    /// or the map (NaN when none moved).
+    pub fn withheld_recall(&self) -> f64 {
+        f64::from(self.true_pos - self.deferred_true) / f64::from(self.true_pos + self.false_neg)
     }
     /// Precision of the "moving" verdict alone: of the features tested moving, the share on
     /// moving objects (NaN when none was); unproven features are not counted.
@@ -258,6 +282,7 @@ pub fn moving_check(pipe: &Pipeline, mask: &GrayImage) -> MovingCheck {
     score_moving(
         &pipe.localiser().frame().features,
         tracker.feature_motion(),
+        tracker.feature_blocked(),
         |i| tracker.feature_segment(i),
         mask,
     )
@@ -268,10 +293,11 @@ pub fn moving_check(pipe: &Pipeline, mask: &GrayImage) -> MovingCheck {
 fn score_moving(
     feats: &[Feature],
     states: &[FeatureMotion],
+    blocked: &[bool],
     segment: impl Fn(usize) -> Option<MotionSegment>,
     mask: &GrayImage,
 ) -> MovingCheck {
-    let n = feats.len().min(states.len());
+    let n = feats.len().min(states.len()).min(blocked.len());
     let truth: Vec<bool> = feats[..n]
         .iter()
         .map(|f| {
@@ -311,6 +337,10 @@ fn score_moving(
             }
             (false, true) => c.false_neg += 1,
             _ => {}
+        }
+        if st == FeatureMotion::Unproven && !blocked[i] {
+            c.deferred += 1;
+            c.deferred_true += u32::from(truth);
         }
         if st == FeatureMotion::Moving {
             c.tested_moving += 1;
@@ -879,31 +909,38 @@ mod tests {
         use FeatureMotion::*;
         // The mask marks x < 10 as moving.
         let mask = GrayImage::from_fn(40, 10, |x, _| Luma([if x < 10 { 255 } else { 0 }]));
-        type Case = (f32, FeatureMotion, Option<(u16, u32)>);
+        // (x, state, object, blocked: kept from making a landmark)
+        type Case = (f32, FeatureMotion, Option<(u16, u32)>, bool);
         let cases: [Case; 10] = [
-            (2.0, Moving, Some((0, 5))),    // true positive of object 0
-            (12.0, Moving, Some((0, 5))),   // static, joined to object 0: joined
-            (14.0, Moving, Some((2, 4))),   // static object 2 tested moving
-            (16.0, Unproven, Some((3, 2))), // static object 3, measured, unproven: pending
-            (18.0, Unproven, Some((4, 0))), // static object 4, nothing measured: unseen
-            (20.0, Parked, Some((5, 6))),   // kept, static: not counted
-            (4.0, Parked, Some((6, 6))),    // kept, moving: false negative
-            (6.0, Unproven, Some((7, 0))),  // removed, moving: true positive
-            (30.0, Static, None),           // static class: not counted
-            (8.0, Static, None),            // static class on the mask: false negative
+            (2.0, Moving, Some((0, 5)), true),     // true positive of object 0
+            (12.0, Moving, Some((0, 5)), true),    // static, joined to object 0: joined
+            (14.0, Moving, Some((2, 4)), true),    // static object 2 tested moving
+            (16.0, Unproven, Some((3, 2)), true),  // static object 3, measured, unproven: pending
+            (18.0, Unproven, Some((4, 0)), false), // static object 4, nothing measured: unseen, deferred
+            (20.0, Parked, Some((5, 6)), false),   // kept, static: not counted
+            (4.0, Parked, Some((6, 6)), false),    // kept, moving: false negative
+            (6.0, Unproven, Some((7, 0)), false),  // removed, moving: true positive, deferred
+            (30.0, Static, None, false),           // static class: not counted
+            (8.0, Static, None, false),            // static class on the mask: false negative
         ];
         let feats: Vec<Feature> = cases.iter().map(|c| feat(c.0, 5.0)).collect();
         let states: Vec<FeatureMotion> = cases.iter().map(|c| c.1).collect();
+        let blocked: Vec<bool> = cases.iter().map(|c| c.3).collect();
         let seg = |i: usize| cases[i].2.map(|(id, measured)| MotionSegment { id, measured });
-        let c = score_moving(&feats, &states, seg, &mask);
+        let c = score_moving(&feats, &states, &blocked, seg, &mask);
         assert_eq!((c.true_pos, c.false_pos, c.false_neg), (2, 4, 2));
         assert_eq!(
             (c.false_pos_joined, c.false_pos_tested, c.false_pos_pending, c.false_pos_unseen),
             (1, 1, 1, 1)
         );
         assert_eq!((c.tested_moving, c.tested_moving_true, c.tested_parked_moving), (3, 1, 1));
+        // Withheld: the two deferred features (one on the mask) count as kept.
+        assert_eq!((c.deferred, c.deferred_true), (2, 1));
+        assert_eq!((c.precision(), c.recall()), (2.0 / 6.0, 2.0 / 4.0));
+        assert_eq!((c.withheld_precision(), c.withheld_recall()), (1.0 / 4.0, 1.0 / 4.0));
         let mut sum = c;
         sum.add(&c);
         assert_eq!((sum.false_pos, sum.false_pos_joined, sum.false_pos_unseen), (8, 2, 2));
+        assert_eq!((sum.deferred, sum.deferred_true), (4, 2));
     }
 }

@@ -206,10 +206,14 @@ pub struct MotionSummary {
     pub unproven_features: u32,
     /// Against the source's moving-object mask, when it has one (`semloc synth`'s `dynamic/`):
     /// the summed counts, precision and recall of "removed" (moving or unproven), and of the
-    /// "moving" verdict alone (tested moving; unproven features left out).
+    /// "moving" verdict alone (tested moving; unproven features left out), and of "withheld"
+    /// (kept out of the pose or the map: removed, less the unproven features matched to no
+    /// landmark, which are treated as parked ones are).
     pub moving_check: Option<MovingCheck>,
     pub moving_precision: Option<f64>,
     pub moving_recall: Option<f64>,
+    pub withheld_precision: Option<f64>,
+    pub withheld_recall: Option<f64>,
     pub tested_moving_precision: Option<f64>,
     pub tested_moving_recall: Option<f64>,
 }
@@ -339,6 +343,8 @@ fn motion_summary(frames: &[FrameRecord], stats: &TrackerStats) -> MotionSummary
         unproven_features: stats.unproven_features,
         moving_precision: check.and_then(|c| finite(c.precision())),
         moving_recall: check.and_then(|c| finite(c.recall())),
+        withheld_precision: check.and_then(|c| finite(c.withheld_precision())),
+        withheld_recall: check.and_then(|c| finite(c.withheld_recall())),
         tested_moving_precision: check.and_then(|c| finite(c.tested_precision())),
         tested_moving_recall: check.and_then(|c| finite(c.tested_recall())),
         moving_check: check,

@@ -204,6 +204,16 @@ fn motion_aware_semantics_find_the_moving_traffic() {
     // on `high` seeds 1-4 (100 frames, hard and EM alike), where the removed features'
     // precision is 0.83-0.92.
     assert!(tested_p >= 0.9, "of the features tested moving only {tested_p:.3} move");
+    // Withheld from the pose or the map: the removed features less the deferred ones
+    // (unproven, matched to no landmark), which are treated as a parked car's are.
+    let (wp, wr) = (m.withheld_precision.unwrap(), m.withheld_recall.unwrap());
+    assert_eq!(wr, f64::from(c.true_pos - c.deferred_true) / f64::from(c.true_pos + c.false_neg));
+    eprintln!("high: withheld from pose or map: precision {wp:.3}, recall {wr:.3}; deferred {} ({} on moving objects)", c.deferred, c.deferred_true);
+    // 0.931 / 0.786 measured (10429 deferred, 7048 of them on moving objects): what is withheld
+    // is on moving objects more often than what is removed, and a fifth of the moving features
+    // are deferred (first sight of a car, or nothing of it re-found, like a parked car's).
+    assert!(wp >= 0.92 && wp > p, "withheld precision {wp:.3} (removed: {p:.3})");
+    assert!(wr >= 0.75 && wr < r, "withheld recall {wr:.3} (removed: {r:.3})");
     // Every wrongly removed feature has exactly one cause.
     let causes = [c.false_pos_joined, c.false_pos_tested, c.false_pos_pending, c.false_pos_unseen];
     eprintln!(
