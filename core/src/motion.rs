@@ -47,6 +47,15 @@
 //!    test is no evidence of motion (the feature may lie on another object than the ones
 //!    whose depths were tried), and motion along the epipolar line passes it, as it passes
 //!    any one-frame test.
+//!    **Epipolar test.** A feature that none of these measured (an object with no stereo
+//!    feature, whose depthless features have no depth to be tested at, or a stereo feature
+//!    whose previous sighting had no depth to start a chain) is matched by appearance alone
+//!    to the previous frame's dynamic-class features (same category, ORB distance ≤
+//!    [`TRACK_MAX_HAMMING`], ratio test) within [`MotionParams::track_px`] of where it is
+//!    now. Had it stood still, the match lies on its epipolar segment, between where the
+//!    feature projects from infinitely far and from [`EPIPOLAR_NEAR_M`]; a match off it
+//!    (beyond the 2D χ² gate) counts as an inconsistent measurement. A match on it counts
+//!    for nothing: a car ahead or oncoming moves along its epipolar line.
 //! 4. **A latent "moving" variable per landmark**, accumulated over frames: each matched
 //!    landmark of the segment adds the segment's evidence to its log-odds (clamped to ±4). The
 //!    A feature matched frame to frame carries the log-odds of the feature it matched the
@@ -101,6 +110,10 @@ pub struct MotionParams {
     /// where a previous-frame feature of a dynamic class would appear if its object stood
     /// still; 0 turns the frame-to-frame test off (only landmarks are tested).
     pub track_px: f32,
+    /// Whether a depthless feature that no other test measured is matched by appearance to
+    /// the previous frame and tested against its epipolar segment (a match off it is
+    /// evidence of motion).
+    pub epipolar: bool,
 }
 
 impl Default for MotionParams {
@@ -113,6 +126,7 @@ impl Default for MotionParams {
             min_evidence: 3,
             max_frame_llr: 1.0,
             track_px: 48.0,
+            epipolar: true,
         }
     }
 }
@@ -235,6 +249,11 @@ pub const TRACK_MAX_HAMMING: u32 = 50;
 /// [`TRACK_MAX_HAMMING`] two thirds of them found no match (on synthetic `high`, seed 1, 19 %
 /// of such features were matched at 50 and 34 % at 80).
 pub const DEPTHLESS_MAX_HAMMING: u32 = 80;
+
+/// Depth (m) that stands for "infinitely far" in the epipolar test.
+pub const EPIPOLAR_FAR_M: f64 = 1.0e5;
+/// Nearest depth (m) a point tested by the epipolar test is taken to have.
+pub const EPIPOLAR_NEAR_M: f64 = 1.0;
 
 /// The two smallest ORB distances offered, and where the smallest came from.
 #[derive(Clone, Copy)]
@@ -598,12 +617,14 @@ impl MotionScratch {
             let fa = feats[ia];
             self.unattached[ia] = false;
             if fa.is_stereo() {
+                self.test_epipolar(ia, feats, cam, &t_prev_cur, params);
                 continue;
             }
             if let Some(ib) = self.test_depthless(ia, feats, cam, &t_prev_cur, params) {
                 self.union(ia, ib);
                 continue;
             }
+            self.test_epipolar(ia, feats, cam, &t_prev_cur, params);
             let mut best: Option<(f32, usize)> = None;
             for b in 0..n {
                 let ib = usize::from(self.dyn_idx[b]);
@@ -796,6 +817,69 @@ impl MotionScratch {
         self.chi2[ia] = chi as f32;
         self.gate[ia] = gate as f32;
         Some(hyp[k].1)
+    }
+
+    /// The epipolar test, for a dynamic-class feature `ia` that nothing else measured (no
+    /// landmark, no frame-to-frame chain, no neighbouring depth that explains it): matched by
+    /// appearance alone to the previous frame's dynamic-class features of its category near
+    /// where it is now (within [`MotionParams::track_px`], ORB distance at most
+    /// [`TRACK_MAX_HAMMING`] with the ratio test), whatever its depth (a stereo feature's is
+    /// not used: the chain test is the one that does).
+    /// A point that stood still was, in the previous frame, on its epipolar segment: between
+    /// where it projects from infinitely far and from [`EPIPOLAR_NEAR_M`]. A match off that
+    /// segment (χ² of the distance to it above the 2D gate) is recorded as an inconsistent
+    /// measurement: evidence of motion on the first frame a depthless object is seen, with
+    /// no depth to go on. A match on the segment is no evidence either way: a car driving
+    /// along the line of sight (ahead, oncoming) moves along its epipolar line.
+    fn test_epipolar(
+        &mut self,
+        ia: usize,
+        feats: &[Feature],
+        cam: &StereoCamera,
+        t_prev_cur: &Se3,
+        params: &MotionParams,
+    ) {
+        if !params.epipolar || params.track_px <= 0.0 || self.prev.is_empty() || self.measured(ia) {
+            return;
+        }
+        let fa = feats[ia];
+        let (u, v) = (f64::from(fa.x), f64::from(fa.y));
+        let at = |z: f64| cam.project(&t_prev_cur.transform_point(&cam.backproject(u, v, z)));
+        let (Some(far), Some(near)) = (at(EPIPOLAR_FAR_M), at(EPIPOLAR_NEAR_M)) else {
+            return;
+        };
+        let cat = category(fa.class);
+        let r = params.track_px * level_scale(fa.level);
+        let mut nearest = Nearest2::NONE;
+        for (j, p) in self.prev.iter().enumerate() {
+            if p.level.abs_diff(fa.level) > 1
+                || category(p.class) != cat
+                || (p.uv[0] - fa.x).abs() > r
+                || (p.uv[1] - fa.y).abs() > r
+            {
+                continue;
+            }
+            nearest.offer(hamming(&p.desc, &fa.desc), j);
+        }
+        if !nearest.passes(TRACK_MAX_HAMMING, self.nn_ratio) {
+            return;
+        }
+        let p = self.prev[nearest.at];
+        // Distance from the match to the segment far..near.
+        let (dx, dy) = (near.x - far.x, near.y - far.y);
+        let (px, py) = (f64::from(p.uv[0]) - far.x, f64::from(p.uv[1]) - far.y);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 { ((px * dx + py * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+        let (ex, ey) = (px - t * dx, py - t * dy);
+        let s2 = 1.0 / level_inv_sigma2(fa.level) + 1.0 / level_inv_sigma2(p.level);
+        let chi = (ex * ex + ey * ey) / s2;
+        let gate = crate::optim::CHI2_MONO;
+        if chi <= gate {
+            return;
+        }
+        self.prev_lo[ia] = p.lo;
+        self.chi2[ia] = chi as f32;
+        self.gate[ia] = gate as f32;
     }
 
     /// Joins the segments of `a` and `b`; the smaller root index stays the root
@@ -1280,5 +1364,83 @@ mod tests {
         assert_eq!(roots[1].0, 0, "{roots:?}");
         assert_eq!(roots[2], (0, Parked, Parked), "{roots:?}");
         assert!(s.consistent(lone_idx), "measured, and consistent, at the parked car's depth");
+    }
+
+    /// Objects without a single stereo feature (no depth to test them at): a car crossing
+    /// 0.6 m per frame leaves its epipolar segment and is called moving in its second frame;
+    /// a parked car, and a car ahead driving at the camera's speed (it moves along its
+    /// epipolar line), are not measured and stay unproven. Without the epipolar test the
+    /// crossing car stays unproven too. A stereo feature with nothing to chain to is tested
+    /// the same way.
+    #[test]
+    fn a_depthless_object_crossing_is_caught_by_the_epipolar_test() {
+        let cam = crate::testing::kitti_cam();
+        let far = 40.0 * cam.baseline_m as f32;
+        let crossing: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(-4.0 + 0.3 * f64::from(k), 0.4 + 0.1 * f64::from(k % 2), 25.0))
+            .collect();
+        let parked: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(5.0 + 0.3 * f64::from(k), 0.6 + 0.1 * f64::from(k % 2), 20.0))
+            .collect();
+        let ahead: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(0.3 * f64::from(k), 0.2 + 0.1 * f64::from(k % 2), 30.0))
+            .collect();
+        let frame = |t: usize| -> std::vec::Vec<Feature> {
+            let mut f = std::vec::Vec::new();
+            let objects = [
+                (&crossing, Vector3::new(0.6 * t as f64, 0.0, 0.0), 0u8),
+                (&parked, Vector3::zeros(), 50),
+                (&ahead, Vector3::new(0.0, 0.0, t as f64), 100),
+            ];
+            for (obj, shift, seed) in objects {
+                for (k, &q) in obj.iter().enumerate() {
+                    let mut d = seen(&cam, &driving(t), q + shift, 8, seed + k as u8);
+                    (d.ur, d.depth_m) = (-1.0, -1.0);
+                    f.push(d);
+                }
+            }
+            f
+        };
+        let run = |p: MotionParams| {
+            let mut s = std::boxed::Box::new(MotionScratch::new());
+            let mut states = std::vec::Vec::new();
+            for t in 0..3 {
+                let feats = frame(t);
+                s.reset(feats.len());
+                s.match_previous(&feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+                s.decide(&feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
+                s.remember(&feats, &cam, &driving(t).inverse(), far);
+                let measured = (0..feats.len()).filter(|&i| s.measured(i)).count();
+                states.push((s.state[0], s.state[4], s.state[8], measured));
+            }
+            states
+        };
+        use FeatureMotion::*;
+        let on = run(MotionParams::default());
+        assert_eq!(on[0], (Unproven, Unproven, Unproven, 0), "first sight: no previous frame");
+        assert_eq!(on[1], (Moving, Unproven, Unproven, 4), "{on:?}");
+        assert_eq!(on[2], (Moving, Unproven, Unproven, 4), "{on:?}");
+        let off = run(MotionParams { epipolar: false, ..MotionParams::default() });
+        assert!(off.iter().all(|&m| m == (Unproven, Unproven, Unproven, 0)), "{off:?}");
+        // A stereo feature whose previous sighting had no depth (no chain to measure it
+        // against) is tested the same way.
+        let p = MotionParams::default();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        for t in 0..2 {
+            let mut feats = frame(t);
+            if t == 1 {
+                for f in &mut feats[..4] {
+                    f.depth_m = 25.0 - 1.0;
+                    f.ur = f.x - (cam.fx_px * cam.baseline_m) as f32 / f.depth_m;
+                }
+            }
+            s.reset(feats.len());
+            let n = s.match_previous(&feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+            assert_eq!(n, 0, "no stereo feature in the previous frame");
+            s.decide(&feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
+            s.remember(&feats, &cam, &driving(t).inverse(), far);
+        }
+        assert!((0..4).all(|i| s.measured(i) && !s.consistent(i)));
+        assert_eq!((s.state[0], s.state[4]), (Moving, Unproven));
     }
 }

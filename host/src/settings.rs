@@ -212,6 +212,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("tracker.motion.min_evidence", "Matched features an object needs before it can be called parked."),
     ("tracker.motion.max_frame_llr", "Largest evidence one frame adds to an object either way, nats."),
     ("tracker.motion.track_px", "Search radius of the frame-to-frame test for objects without landmarks, px at level 0 (0: off)."),
+    ("tracker.motion.epipolar", "Match a depthless feature nothing else measured to the previous frame by appearance; off its epipolar line is evidence of motion."),
     ("semantics", "Semantic weighting of features."),
     ("semantics.mode", "\"off\" (geometric), \"cull\" (no features on dynamic classes), \"full\" (the paper: cull dynamic, x3 construction and object classes) or \"motion\" (as full, but dynamic-class features removed only where the object moves)."),
     ("semantics.model", "The int8 segmentation network (.slm); relative to this file's folder. Without one, labels come from the dataset's semantic/ folder."),
