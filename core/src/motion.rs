@@ -52,10 +52,18 @@
 //!    whose previous sighting had no depth to start a chain) is matched by appearance alone
 //!    to the previous frame's dynamic-class features (same category, ORB distance ≤
 //!    [`TRACK_MAX_HAMMING`], ratio test) within [`MotionParams::track_px`] of where it is
-//!    now. Had it stood still, the match lies on its epipolar segment, between where the
-//!    feature projects from infinitely far and from [`EPIPOLAR_NEAR_M`]; a match off it
-//!    (beyond the 2D χ² gate) counts as an inconsistent measurement. A match on it counts
-//!    for nothing: a car ahead or oncoming moves along its epipolar line.
+//!    now. Had it stood still, it lies on the epipolar segment of the ray it was first seen
+//!    on (a depthless feature matched this way, or by the depthless test, continues the
+//!    chain of its match, so motion along the line of sight adds up over frames as the
+//!    chain test's does): between where that ray's points from [`EPIPOLAR_NEAR_M`] and from
+//!    as far as a still point of its class can be ([`static_depth`]) project now. A feature
+//!    off it (beyond the 2D χ² gate) counts as an inconsistent measurement; on it, for
+//!    nothing. How far a still point can be follows from the camera's height above the road
+//!    ([`MotionParams::camera_height_m`]): below the horizon it is not under the road, above
+//!    it not higher than the tallest of its class, with slack for pitch and grade. A cyclist
+//!    riding ahead at the ego's speed, whose features do not move in the image, is then off
+//!    its segment, as is a lorry's top; a car oncoming, or ahead at another speed, still
+//!    moves along it until the chain's segment ends.
 //! 4. **A latent "moving" variable per landmark**, accumulated over frames: each matched
 //!    landmark of the segment adds the segment's evidence to its log-odds (clamped to ±4). The
 //!    A feature matched frame to frame carries the log-odds of the feature it matched the
@@ -114,6 +122,12 @@ pub struct MotionParams {
     /// the previous frame and tested against its epipolar segment (a match off it is
     /// evidence of motion).
     pub epipolar: bool,
+    /// Height (m) of the left camera above the road, the camera level with it; 0 if unknown.
+    /// A dynamic-class point that stood still is neither under the road nor above the
+    /// tallest of its class, so its depth in the epipolar test is bounded ([`static_depth`]):
+    /// a cyclist riding ahead at the ego's speed, whose features do not move in the image, is
+    /// then off its epipolar segment.
+    pub camera_height_m: f32,
 }
 
 impl Default for MotionParams {
@@ -127,6 +141,7 @@ impl Default for MotionParams {
             max_frame_llr: 1.0,
             track_px: 48.0,
             epipolar: true,
+            camera_height_m: 1.65,
         }
     }
 }
@@ -231,8 +246,11 @@ struct PrevFeature {
     level: u8,
     class: u8,
     lo: f32,
-    /// Where it was seen (level-0 px); for a feature without stereo depth (after the first
-    /// [`MotionScratch::prev_stereo`]) this is all there is: `p_w` and the anchor are unset.
+    /// Where it was seen (level-0 px). For a feature without stereo depth (after the first
+    /// [`MotionScratch::prev_stereo`]) the chain's first sighting is a ray, not a point:
+    /// `anchor_w` is that frame's camera centre, `p_w` the ray's step per metre of depth
+    /// (world), `anchor_depth` the farthest depth on it that is not under the road
+    /// ([`static_depth`]), and `anchor_level` its level.
     uv: [f32; 2],
 }
 
@@ -254,6 +272,16 @@ pub const DEPTHLESS_MAX_HAMMING: u32 = 80;
 pub const EPIPOLAR_FAR_M: f64 = 1.0e5;
 /// Nearest depth (m) a point tested by the epipolar test is taken to have.
 pub const EPIPOLAR_NEAR_M: f64 = 1.0;
+/// How far (m) below the camera's road plane a static point may lie: the road's camber and
+/// kerbs, and the height error of the mounting.
+pub const GROUND_MARGIN_M: f64 = 0.3;
+/// How much steeper (rad) than the camera's road plane the road may fall away: the car's
+/// pitch under braking and the road's change of grade (2°).
+pub const GROUND_TOLERANCE_RAD: f64 = 0.034_906_6;
+/// Tallest vehicle (m above the road) the epipolar test allows for: a bus or a lorry.
+pub const VEHICLE_MAX_HEIGHT_M: f64 = 4.5;
+/// Tallest pedestrian or bicyclist (m above the road) the epipolar test allows for.
+pub const HUMAN_MAX_HEIGHT_M: f64 = 2.5;
 
 /// The two smallest ORB distances offered, and where the smallest came from.
 #[derive(Clone, Copy)]
@@ -394,7 +422,14 @@ impl MotionScratch {
     /// final pose `t_wc`, with the log-odds [`Self::decide`] gave them, for the next frame's
     /// frame-to-frame test, then its dynamic-class features without stereo depth (image
     /// position, with the pose) for the depthless test; the first [`PREV_CAPACITY`] in all.
-    pub fn remember(&mut self, feats: &[Feature], cam: &StereoCamera, t_wc: &Se3, far_m: f32) {
+    pub fn remember(
+        &mut self,
+        feats: &[Feature],
+        cam: &StereoCamera,
+        t_wc: &Se3,
+        far_m: f32,
+        params: &MotionParams,
+    ) {
         self.next.clear();
         for (i, f) in feats.iter().enumerate() {
             if !is_dynamic(f.class) || !f.is_stereo() || f.depth_m > far_m {
@@ -402,12 +437,13 @@ impl MotionScratch {
             }
             let pc = cam.backproject(f64::from(f.x), f64::from(f.y), f64::from(f.depth_m));
             let p_w = t_wc.transform_point(&pc);
-            // A matched feature continues its chain: the anchor stays where the chain began.
-            let (anchor_w, anchor_depth, anchor_level) =
-                match self.prev.get(usize::from(self.prev_of[i])) {
-                    Some(p) => (p.anchor_w, p.anchor_depth, p.anchor_level),
-                    None => (p_w, f.depth_m, f.level),
-                };
+            // A feature matched to a stereo one continues its chain: the anchor stays where
+            // the chain began.
+            let link = usize::from(self.prev_of[i]);
+            let (anchor_w, anchor_depth, anchor_level) = match self.prev.get(link) {
+                Some(p) if link < self.prev_stereo => (p.anchor_w, p.anchor_depth, p.anchor_level),
+                _ => (p_w, f.depth_m, f.level),
+            };
             let p = PrevFeature {
                 p_w,
                 anchor_w,
@@ -425,16 +461,30 @@ impl MotionScratch {
         }
         let stereo = self.next.len();
         // Then the features without stereo depth: the next frame tests them against the depth
-        // of the objects around them.
+        // of the objects around them, and against the ray of their chain's first sighting (a
+        // feature matched to a depthless one continues its chain).
+        let centre = t_wc.transform_point(&Vector3::zeros());
         for (i, f) in feats.iter().enumerate() {
             if !is_dynamic(f.class) || f.is_stereo() {
                 continue;
             }
+            let link = usize::from(self.prev_of[i]);
+            let (ray_w, anchor_w, anchor_depth, anchor_level) = match self.prev.get(link) {
+                Some(p) if link >= self.prev_stereo => {
+                    (p.p_w, p.anchor_w, p.anchor_depth, p.anchor_level)
+                }
+                _ => {
+                    let (u, v) = (f64::from(f.x), f64::from(f.y));
+                    let ray = t_wc.transform_point(&cam.backproject(u, v, 1.0)) - centre;
+                    let far = static_depth(cam, v, f.class, params.camera_height_m);
+                    (ray, centre, far as f32, f.level)
+                }
+            };
             let p = PrevFeature {
-                p_w: Vector3::zeros(),
-                anchor_w: Vector3::zeros(),
-                anchor_depth: 0.0,
-                anchor_level: f.level,
+                p_w: ray_w,
+                anchor_w,
+                anchor_depth,
+                anchor_level,
                 desc: f.desc,
                 level: f.level,
                 class: f.class,
@@ -617,14 +667,14 @@ impl MotionScratch {
             let fa = feats[ia];
             self.unattached[ia] = false;
             if fa.is_stereo() {
-                self.test_epipolar(ia, feats, cam, &t_prev_cur, params);
+                self.test_epipolar(ia, feats, cam, t_cw, params);
                 continue;
             }
             if let Some(ib) = self.test_depthless(ia, feats, cam, &t_prev_cur, params) {
                 self.union(ia, ib);
                 continue;
             }
-            self.test_epipolar(ia, feats, cam, &t_prev_cur, params);
+            self.test_epipolar(ia, feats, cam, t_cw, params);
             let mut best: Option<(f32, usize)> = None;
             for b in 0..n {
                 let ib = usize::from(self.dyn_idx[b]);
@@ -814,6 +864,7 @@ impl MotionScratch {
             return None;
         }
         self.prev_lo[ia] = p.lo;
+        self.prev_of[ia] = nearest.at as u16;
         self.chi2[ia] = chi as f32;
         self.gate[ia] = gate as f32;
         Some(hyp[k].1)
@@ -825,29 +876,26 @@ impl MotionScratch {
     /// where it is now (within [`MotionParams::track_px`], ORB distance at most
     /// [`TRACK_MAX_HAMMING`] with the ratio test), whatever its depth (a stereo feature's is
     /// not used: the chain test is the one that does).
-    /// A point that stood still was, in the previous frame, on its epipolar segment: between
-    /// where it projects from infinitely far and from [`EPIPOLAR_NEAR_M`]. A match off that
-    /// segment (χ² of the distance to it above the 2D gate) is recorded as an inconsistent
-    /// measurement: evidence of motion on the first frame a depthless object is seen, with
-    /// no depth to go on. A match on the segment is no evidence either way: a car driving
-    /// along the line of sight (ahead, oncoming) moves along its epipolar line.
+    /// The match gives the ray the feature was first seen on: a depthless match's chain's
+    /// first sighting (the match continues that chain), a stereo match's ray at the previous
+    /// pose. A point that stood still is now on that ray's epipolar segment: where its points
+    /// from [`EPIPOLAR_NEAR_M`] (and at least that far in front of this camera) to
+    /// [`static_depth`] project at `t_cw`. A feature off that segment (χ² of the distance to
+    /// it above the 2D gate) is recorded as an inconsistent measurement: evidence of motion
+    /// with no depth to go on. On the segment it is no evidence either way: a car driving
+    /// along the line of sight (ahead, oncoming) moves along it.
     fn test_epipolar(
         &mut self,
         ia: usize,
         feats: &[Feature],
         cam: &StereoCamera,
-        t_prev_cur: &Se3,
+        t_cw: &Se3,
         params: &MotionParams,
     ) {
         if !params.epipolar || params.track_px <= 0.0 || self.prev.is_empty() || self.measured(ia) {
             return;
         }
         let fa = feats[ia];
-        let (u, v) = (f64::from(fa.x), f64::from(fa.y));
-        let at = |z: f64| cam.project(&t_prev_cur.transform_point(&cam.backproject(u, v, z)));
-        let (Some(far), Some(near)) = (at(EPIPOLAR_FAR_M), at(EPIPOLAR_NEAR_M)) else {
-            return;
-        };
         let cat = category(fa.class);
         let r = params.track_px * level_scale(fa.level);
         let mut nearest = Nearest2::NONE;
@@ -864,14 +912,52 @@ impl MotionScratch {
         if !nearest.passes(TRACK_MAX_HAMMING, self.nn_ratio) {
             return;
         }
-        let p = self.prev[nearest.at];
-        // Distance from the match to the segment far..near.
-        let (dx, dy) = (near.x - far.x, near.y - far.y);
-        let (px, py) = (f64::from(p.uv[0]) - far.x, f64::from(p.uv[1]) - far.y);
+        let j = nearest.at;
+        let p = self.prev[j];
+        // The ray the feature was first seen on: a depthless chain's anchor, else the
+        // previous sighting's ray at the previous pose.
+        let (origin, step, far, level) = if j >= self.prev_stereo {
+            (p.anchor_w, p.p_w, f64::from(p.anchor_depth), p.anchor_level)
+        } else {
+            let t_wp = self.prev_t_cw.inverse();
+            let origin = t_wp.transform_point(&Vector3::zeros());
+            let (u, v) = (f64::from(p.uv[0]), f64::from(p.uv[1]));
+            let step = t_wp.transform_point(&cam.backproject(u, v, 1.0)) - origin;
+            (origin, step, static_depth(cam, v, p.class, params.camera_height_m), p.level)
+        };
+        if j >= self.prev_stereo {
+            // A depthless match continues its chain (a stereo one's is the chain test's).
+            self.prev_of[ia] = j as u16;
+        }
+        // Its stretch from EPIPOLAR_NEAR_M to `far` that is at least EPIPOLAR_NEAR_M in
+        // front of this camera: depth here is z0 + s dz at depth s there.
+        let o_c = t_cw.transform_point(&origin);
+        let dz = t_cw.transform_point(&(origin + step)).z - o_c.z;
+        let (mut s0, mut s1) = (EPIPOLAR_NEAR_M, far.max(EPIPOLAR_NEAR_M));
+        if dz.abs() > 1e-12 {
+            let s_min = (EPIPOLAR_NEAR_M - o_c.z) / dz;
+            if dz > 0.0 {
+                s0 = s0.max(s_min);
+            } else {
+                s1 = s1.min(s_min);
+            }
+        } else if o_c.z < EPIPOLAR_NEAR_M {
+            return;
+        }
+        if s0 > s1 {
+            return;
+        }
+        let at = |s: f64| cam.project(&t_cw.transform_point(&(origin + step * s)));
+        let (Some(a), Some(b)) = (at(s0), at(s1)) else {
+            return;
+        };
+        // Distance from the feature to that segment, in this image.
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        let (px, py) = (f64::from(fa.x) - a.x, f64::from(fa.y) - a.y);
         let len2 = dx * dx + dy * dy;
         let t = if len2 > 0.0 { ((px * dx + py * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
         let (ex, ey) = (px - t * dx, py - t * dy);
-        let s2 = 1.0 / level_inv_sigma2(fa.level) + 1.0 / level_inv_sigma2(p.level);
+        let s2 = 1.0 / level_inv_sigma2(fa.level) + 1.0 / level_inv_sigma2(level);
         let chi = (ex * ex + ey * ey) / s2;
         let gate = crate::optim::CHI2_MONO;
         if chi <= gate {
@@ -1022,6 +1108,33 @@ impl MotionScratch {
         }
         rep
     }
+}
+
+/// Farthest depth (m, along the optical axis) at which a point of label `class` on image row
+/// `v` could stand still, for a level camera `camera_height_m` above the road: not under the
+/// road ([`GROUND_MARGIN_M`] of slack) below the horizon, not above the tallest of its kind
+/// ([`VEHICLE_MAX_HEIGHT_M`], [`HUMAN_MAX_HEIGHT_M`]) above it, the ray taken
+/// [`GROUND_TOLERANCE_RAD`] nearer the horizon (the car's pitch, the road's change of grade).
+/// [`EPIPOLAR_FAR_M`] within that tolerance of the horizon, for a static class, or when the
+/// height is unknown (0).
+pub fn static_depth(cam: &StereoCamera, v: f64, class: u8, camera_height_m: f32) -> f64 {
+    let h = f64::from(camera_height_m);
+    let top = match category(class) {
+        Category::Vehicle => VEHICLE_MAX_HEIGHT_M,
+        Category::Human => HUMAN_MAX_HEIGHT_M,
+        _ => return EPIPOLAR_FAR_M,
+    };
+    if h <= 0.0 {
+        return EPIPOLAR_FAR_M;
+    }
+    // The ray falls (v − cy) / fy per metre of depth; the road, at most tan(tolerance).
+    let slope = (v - cam.cy_px) / cam.fy_px;
+    let (room, steep) = if slope > 0.0 { (h + GROUND_MARGIN_M, slope) } else { (top - h, -slope) };
+    let steep = steep - libm::tan(GROUND_TOLERANCE_RAD);
+    if room <= 0.0 || steep <= room / EPIPOLAR_FAR_M {
+        return EPIPOLAR_FAR_M;
+    }
+    room / steep
 }
 
 #[cfg(test)]
@@ -1219,7 +1332,7 @@ mod tests {
         s.reset(feats.len());
         let measured = s.match_previous(feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
         s.decide(feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
-        s.remember(feats, &cam, &driving(t).inverse(), far);
+        s.remember(feats, &cam, &driving(t).inverse(), far, &p);
         measured
     }
 
@@ -1409,7 +1522,7 @@ mod tests {
                 s.reset(feats.len());
                 s.match_previous(&feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
                 s.decide(&feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
-                s.remember(&feats, &cam, &driving(t).inverse(), far);
+                s.remember(&feats, &cam, &driving(t).inverse(), far, &p);
                 let measured = (0..feats.len()).filter(|&i| s.measured(i)).count();
                 states.push((s.state[0], s.state[4], s.state[8], measured));
             }
@@ -1438,9 +1551,118 @@ mod tests {
             let n = s.match_previous(&feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
             assert_eq!(n, 0, "no stereo feature in the previous frame");
             s.decide(&feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
-            s.remember(&feats, &cam, &driving(t).inverse(), far);
+            s.remember(&feats, &cam, &driving(t).inverse(), far, &p);
         }
         assert!((0..4).all(|i| s.measured(i) && !s.consistent(i)));
         assert_eq!((s.state[0], s.state[4]), (Moving, Unproven));
+    }
+
+    /// A cyclist riding ahead at the camera's speed, without stereo depth: its features do
+    /// not move in the image, which a point that stood still could only do from far beyond
+    /// where its ray meets the road. With the camera's height the epipolar segment ends
+    /// there, and the cyclist is called moving in its second frame; without it (0) it stays
+    /// unproven. A parked car's features below the horizon stay unmeasured either way.
+    #[test]
+    fn a_depthless_cyclist_riding_ahead_is_off_its_segment_above_the_road() {
+        let cam = crate::testing::kitti_cam();
+        let far = 40.0 * cam.baseline_m as f32;
+        // 0.15-0.45 m above the road (camera 1.65 m up), 10 m ahead, 1.5-2.4 m to the right.
+        let cyclist: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(1.5 + 0.3 * f64::from(k), 1.5 - 0.1 * f64::from(k % 4), 10.0))
+            .collect();
+        let parked: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(3.0 + 0.3 * f64::from(k), 1.5 - 0.3 * f64::from(k % 2), 8.0))
+            .collect();
+        let run = |p: MotionParams| {
+            let mut s = std::boxed::Box::new(MotionScratch::new());
+            let mut states = std::vec::Vec::new();
+            for t in 0..3 {
+                let mut feats = std::vec::Vec::new();
+                let objects = [
+                    (&cyclist, Vector3::new(0.0, 0.0, t as f64), 0u8, 10u8),
+                    (&parked, Vector3::zeros(), 50, 8),
+                ];
+                for (obj, shift, seed, class) in objects {
+                    for (k, &q) in obj.iter().enumerate() {
+                        let mut d = seen(&cam, &driving(t), q + shift, class, seed + k as u8);
+                        (d.ur, d.depth_m) = (-1.0, -1.0);
+                        feats.push(d);
+                    }
+                }
+                s.reset(feats.len());
+                s.match_previous(&feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+                s.decide(&feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
+                s.remember(&feats, &cam, &driving(t).inverse(), far, &p);
+                let measured = (0..feats.len()).filter(|&i| s.measured(i)).count();
+                states.push((s.state[0], s.state[4], measured));
+            }
+            states
+        };
+        use FeatureMotion::*;
+        let on = run(MotionParams::default());
+        assert_eq!(on[0], (Unproven, Unproven, 0), "first sight: no previous frame");
+        assert_eq!(on[1], (Moving, Unproven, 4), "{on:?}");
+        assert_eq!(on[2], (Moving, Unproven, 4), "{on:?}");
+        let off = run(MotionParams { camera_height_m: 0.0, ..MotionParams::default() });
+        assert!(off.iter().all(|&m| m == (Unproven, Unproven, 0)), "{off:?}");
+    }
+
+    /// A depthless chain measures against the ray it began on: a cyclist riding ahead at the
+    /// camera's speed, 0.85-0.9 m above the road, is within its one-frame segment (2.9 px
+    /// beyond its end, under the gate), but two frames from the chain's first sighting it is
+    /// 5.8 px beyond it and called moving.
+    #[test]
+    fn a_depthless_chain_accumulates_motion_along_the_line_of_sight() {
+        let cam = crate::testing::kitti_cam();
+        let far = 40.0 * cam.baseline_m as f32;
+        let p = MotionParams::default();
+        let cyclist: std::vec::Vec<Vector3<f64>> = (0..4)
+            .map(|k| Vector3::new(1.5 + 0.1 * f64::from(k), 0.8 - 0.02 * f64::from(k), 10.0))
+            .collect();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        let mut states = std::vec::Vec::new();
+        for t in 0..4 {
+            let feats: std::vec::Vec<Feature> = cyclist
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| {
+                    let mut d =
+                        seen(&cam, &driving(t), q + Vector3::new(0.0, 0.0, t as f64), 10, k as u8);
+                    (d.ur, d.depth_m) = (-1.0, -1.0);
+                    d
+                })
+                .collect();
+            s.reset(feats.len());
+            s.match_previous(&feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
+            s.decide(&feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
+            s.remember(&feats, &cam, &driving(t).inverse(), far, &p);
+            let measured = (0..feats.len()).filter(|&i| s.measured(i)).count();
+            states.push((s.state[0], measured));
+        }
+        use FeatureMotion::*;
+        assert_eq!(states, [(Unproven, 0), (Unproven, 0), (Moving, 4), (Moving, 4)]);
+    }
+
+    /// The bound on a static point's depth: below the horizon where the ray, 2° less steep,
+    /// meets the road 0.3 m lower; above it, where it reaches the tallest of the class (4.5 m
+    /// for a vehicle, 2.5 m for a person); unbounded within 2° of the horizon, for static
+    /// classes and without a camera height.
+    #[test]
+    fn static_depth_bounds_rays_by_the_road_and_the_class_height() {
+        let cam = crate::testing::kitti_cam();
+        let tol = libm::tan(2f64.to_radians());
+        for class in [8, 9, 10] {
+            assert_eq!(static_depth(&cam, cam.cy_px + 10.0, class, 1.65), EPIPOLAR_FAR_M);
+            assert_eq!(static_depth(&cam, cam.cy_px - 10.0, class, 1.65), EPIPOLAR_FAR_M);
+            assert_eq!(static_depth(&cam, cam.cy_px + 200.0, class, 0.0), EPIPOLAR_FAR_M);
+            let z = static_depth(&cam, cam.cy_px + 200.0, class, 1.65);
+            let want = 1.95 / (200.0 / cam.fy_px - tol);
+            assert!((z - want).abs() < 1e-5 && z > 7.5 && z < 8.5, "{z}");
+        }
+        assert_eq!(static_depth(&cam, cam.cy_px + 200.0, 1, 1.65), EPIPOLAR_FAR_M);
+        let car = static_depth(&cam, cam.cy_px - 100.0, 8, 1.65);
+        assert!((car - 2.85 / (100.0 / cam.fy_px - tol)).abs() < 1e-5, "{car}");
+        let person = static_depth(&cam, cam.cy_px - 100.0, 9, 1.65);
+        assert!((person - 0.85 / (100.0 / cam.fy_px - tol)).abs() < 1e-5, "{person}");
     }
 }

@@ -213,6 +213,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("tracker.motion.max_frame_llr", "Largest evidence one frame adds to an object either way, nats."),
     ("tracker.motion.track_px", "Search radius of the frame-to-frame test for objects without landmarks, px at level 0 (0: off)."),
     ("tracker.motion.epipolar", "Match a depthless feature nothing else measured to the previous frame by appearance; off its epipolar line is evidence of motion."),
+    ("tracker.motion.camera_height_m", "Height of the left camera above the road, m (level with it; 0: unknown). In the epipolar test a still point of a dynamic class is neither under the road nor higher than 4.5 m (vehicles) or 2.5 m (people)."),
     ("semantics", "Semantic weighting of features."),
     ("semantics.mode", "\"off\" (geometric), \"cull\" (no features on dynamic classes), \"full\" (the paper: cull dynamic, x3 construction and object classes) or \"motion\" (as full, but dynamic-class features removed only where the object moves)."),
     ("semantics.model", "The int8 segmentation network (.slm); relative to this file's folder. Without one, labels come from the dataset's semantic/ folder."),
@@ -357,6 +358,12 @@ impl Settings {
             return bad(
                 "tracker.motion.track_px",
                 format!("{} must be finite and ≥ 0", t.motion.track_px),
+            );
+        }
+        if !(t.motion.camera_height_m.is_finite() && t.motion.camera_height_m >= 0.0) {
+            return bad(
+                "tracker.motion.camera_height_m",
+                format!("{} must be finite and ≥ 0", t.motion.camera_height_m),
             );
         }
         if t.keyframe_max_interval == 0 {

@@ -562,7 +562,13 @@ impl Tracker {
         rep.t_wc = self.t_cw.inverse();
         // The frame-to-frame motion test compares the next frame with this one's final pose.
         if self.motion_aware && self.solved {
-            self.motion.remember(&frame.features, &self.cam, &rep.t_wc, self.problem.far_m);
+            self.motion.remember(
+                &frame.features,
+                &self.cam,
+                &rep.t_wc,
+                self.problem.far_m,
+                &self.params.motion,
+            );
         } else {
             self.motion.forget_previous();
         }

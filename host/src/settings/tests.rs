@@ -123,6 +123,7 @@ fn out_of_range_values_are_refused_with_their_key() {
         ("[tracker.em]\ntau_orb = -1.0\n", "tracker.em.tau_orb"),
         ("[tracker.motion]\nprior_vehicle = 0.0\n", "tracker.motion.prior_vehicle"),
         ("[tracker.motion]\ntrack_px = -1.0\n", "tracker.motion.track_px"),
+        ("[tracker.motion]\ncamera_height_m = -1.65\n", "tracker.motion.camera_height_m"),
         ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\n", "camera"),
         ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\nbaseline = 1.0\n", "camera"),
         ("[camera]\nfx = -1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\n", "camera.fx"),
