@@ -77,7 +77,8 @@
 //!    posterior `p(moving) < 0.1` is *parked*: its consistent matches rejoin the pose solve
 //!    (one more solve) and the keyframe. A segment with `p(moving) > 0.5` is *moving*: its
 //!    features are unlinked and create no landmarks. Anything else is *unproven*: excluded
-//!    from this frame's pose, but its unmatched features may create landmarks so that the
+//!    from this frame's pose, but while it is more likely parked than moving (a car untested,
+//!    with its prior, not a person) its unmatched features may create landmarks so that the
 //!    next frames can test it.
 //!
 //! The EM association sees the outcome through its candidates: held features have none.
@@ -1086,10 +1087,11 @@ impl MotionScratch {
             };
             self.state[i] = state;
             // Moving objects make no landmarks; an unproven object's matched features do not
-            // duplicate the landmark they matched.
+            // duplicate the landmark they matched, and its others make landmarks only while it
+            // is more likely parked than moving.
             self.blocked[i] = match state {
                 FeatureMotion::Moving => true,
-                FeatureMotion::Unproven => self.cand[i] != NO_LANDMARK,
+                FeatureMotion::Unproven => self.cand[i] != NO_LANDMARK || post >= MOVING_LOGIT,
                 _ => false,
             };
             if i == r {
@@ -1207,7 +1209,9 @@ mod tests {
     }
 
     /// A parked car (consistent matches) is used, a moving one (inconsistent) removed, and a
-    /// car without matches stays unproven; the landmarks accumulate the evidence.
+    /// pedestrian and a car without matches stay unproven: the car (more likely parked than
+    /// moving) may make landmarks, the pedestrian (as likely moving) may not. The landmarks
+    /// accumulate the evidence.
     #[test]
     fn decisions_follow_the_evidence() {
         let mut s = std::boxed::Box::new(MotionScratch::new());
@@ -1221,6 +1225,9 @@ mod tests {
         }
         for k in 0..3 {
             feats.push(feat(1000.0 + 10.0 * k as f32, 100.0, 12.0, 9)); // unmatched pedestrian
+        }
+        for k in 0..3 {
+            feats.push(feat(1400.0 + 10.0 * k as f32, 100.0, 12.0, 8)); // unmatched car
         }
         let mut lo = [0.0f32; 16];
         let frame = |s: &mut MotionScratch, lo: &mut [f32; 16]| {
@@ -1239,18 +1246,18 @@ mod tests {
         // One frame of consistent matches is not yet enough to call a car parked; one frame
         // of inconsistent ones calls the other moving.
         let rep = frame(&mut s, &mut lo);
-        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (0, 5, 8));
+        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (0, 5, 11));
         assert!(lo[..5].iter().all(|&l| (l + p.max_frame_llr).abs() < 1e-6));
         let rep = frame(&mut s, &mut lo);
-        assert_eq!(rep.segments, 3);
+        assert_eq!(rep.segments, 4);
         assert_eq!(rep.parked_segments, 1);
         assert_eq!(rep.moving_segments, 1);
-        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (5, 5, 3));
+        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (5, 5, 6));
         assert!(s.state[..5].iter().all(|&m| m == FeatureMotion::Parked));
         assert!(s.state[5..10].iter().all(|&m| m == FeatureMotion::Moving));
-        assert!(s.state[10..13].iter().all(|&m| m == FeatureMotion::Unproven));
-        assert!(s.blocked[5..10].iter().all(|&b| b));
-        assert!(!s.blocked[..5].iter().any(|&b| b) && !s.blocked[10..13].iter().any(|&b| b));
+        assert!(s.state[10..16].iter().all(|&m| m == FeatureMotion::Unproven));
+        assert!(s.blocked[5..13].iter().all(|&b| b));
+        assert!(!s.blocked[..5].iter().any(|&b| b) && !s.blocked[13..16].iter().any(|&b| b));
         // Clamped frame evidence went to each landmark, twice.
         assert!(lo[..5].iter().all(|&l| (l + 2.0 * p.max_frame_llr).abs() < 1e-6));
         assert!(lo[5..10].iter().all(|&l| (l - 2.0 * p.max_frame_llr).abs() < 1e-6));
@@ -1263,7 +1270,7 @@ mod tests {
             assert!(seg[range].iter().all(|g| g.id == id && g.measured == measured));
         }
         assert!(seg[0].id != seg[5].id && seg[5].id != seg[10].id && seg[0].id != seg[10].id);
-        assert_eq!(s.segment_of(13), None, "beyond the frame's features");
+        assert_eq!(s.segment_of(16), None, "beyond the frame's features");
         s.reset(feats.len());
         assert_eq!(s.segment_of(0), None, "no motion test on this frame yet");
     }
