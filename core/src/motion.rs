@@ -250,8 +250,8 @@ struct PrevFeature {
     /// Where it was seen (level-0 px). For a feature without stereo depth (after the first
     /// [`MotionScratch::prev_stereo`]) the chain's first sighting is a ray, not a point:
     /// `anchor_w` is that frame's camera centre, `p_w` the ray's step per metre of depth
-    /// (world), `anchor_depth` the farthest depth on it that is not under the road
-    /// ([`static_depth`]), and `anchor_level` its level.
+    /// (world), `anchor_depth` the farthest depth on it at which a point of its class could
+    /// stand still ([`static_depth`]), and `anchor_level` its level.
     uv: [f32; 2],
 }
 
@@ -464,7 +464,6 @@ impl MotionScratch {
         // Then the features without stereo depth: the next frame tests them against the depth
         // of the objects around them, and against the ray of their chain's first sighting (a
         // feature matched to a depthless one continues its chain).
-        let centre = t_wc.transform_point(&Vector3::zeros());
         for (i, f) in feats.iter().enumerate() {
             if !is_dynamic(f.class) || f.is_stereo() {
                 continue;
@@ -475,10 +474,9 @@ impl MotionScratch {
                     (p.p_w, p.anchor_w, p.anchor_depth, p.anchor_level)
                 }
                 _ => {
-                    let (u, v) = (f64::from(f.x), f64::from(f.y));
-                    let ray = t_wc.transform_point(&cam.backproject(u, v, 1.0)) - centre;
-                    let far = static_depth(cam, v, f.class, params.camera_height_m);
-                    (ray, centre, far as f32, f.level)
+                    let (origin, step, far) =
+                        sighting_ray(cam, t_wc, f.x, f.y, f.class, params.camera_height_m);
+                    (step, origin, far as f32, f.level)
                 }
             };
             let p = PrevFeature {
@@ -918,18 +916,15 @@ impl MotionScratch {
         // The ray the feature was first seen on: a depthless chain's anchor, else the
         // previous sighting's ray at the previous pose.
         let (origin, step, far, level) = if j >= self.prev_stereo {
+            // A depthless match continues its chain (a stereo one's is the chain test's).
+            self.prev_of[ia] = j as u16;
             (p.anchor_w, p.p_w, f64::from(p.anchor_depth), p.anchor_level)
         } else {
             let t_wp = self.prev_t_cw.inverse();
-            let origin = t_wp.transform_point(&Vector3::zeros());
-            let (u, v) = (f64::from(p.uv[0]), f64::from(p.uv[1]));
-            let step = t_wp.transform_point(&cam.backproject(u, v, 1.0)) - origin;
-            (origin, step, static_depth(cam, v, p.class, params.camera_height_m), p.level)
+            let h = params.camera_height_m;
+            let (origin, step, far) = sighting_ray(cam, &t_wp, p.uv[0], p.uv[1], p.class, h);
+            (origin, step, far, p.level)
         };
-        if j >= self.prev_stereo {
-            // A depthless match continues its chain (a stereo one's is the chain test's).
-            self.prev_of[ia] = j as u16;
-        }
         // Its stretch from EPIPOLAR_NEAR_M to `far` that is at least EPIPOLAR_NEAR_M in
         // front of this camera: depth here is z0 + s dz at depth s there.
         let o_c = t_cw.transform_point(&origin);
@@ -1110,6 +1105,23 @@ impl MotionScratch {
         }
         rep
     }
+}
+
+/// The ray through pixel (`u`, `v`) of a camera at `t_wc` (world from camera), for a feature
+/// of label `class`: the camera centre and the step per metre of depth (world), and the
+/// farthest depth at which a point of that class could stand still on it ([`static_depth`]).
+fn sighting_ray(
+    cam: &StereoCamera,
+    t_wc: &Se3,
+    u: f32,
+    v: f32,
+    class: u8,
+    camera_height_m: f32,
+) -> (Vector3<f64>, Vector3<f64>, f64) {
+    let (u, v) = (f64::from(u), f64::from(v));
+    let origin = t_wc.transform_point(&Vector3::zeros());
+    let step = t_wc.transform_point(&cam.backproject(u, v, 1.0)) - origin;
+    (origin, step, static_depth(cam, v, class, camera_height_m))
 }
 
 /// Farthest depth (m, along the optical axis) at which a point of label `class` on image row
