@@ -79,7 +79,11 @@
 //!    features are unlinked and create no landmarks. Anything else is *unproven*: excluded
 //!    from this frame's pose, but while it is more likely parked than moving (a car untested,
 //!    with its prior, not a person) its unmatched features may create landmarks so that the
-//!    next frames can test it.
+//!    next frames can test it; not, though, while nothing of it has been measured and none of
+//!    its features has stereo depth: such an object (a lorry too near for the stereo search,
+//!    a car oncoming in the next lane) cannot start a chain, and if it moves, a landmark
+//!    triangulated from its features between two keyframes is placed by its motion as much
+//!    as by ours.
 //!
 //! The EM association sees the outcome through its candidates: held features have none.
 //!
@@ -335,6 +339,8 @@ pub(crate) struct MotionScratch {
     n_bad: [u16; FRAME_CAPACITY],
     lo_sum: [f32; FRAME_CAPACITY],
     n_lm: [u16; FRAME_CAPACITY],
+    /// Per segment root: whether any of its features has stereo depth.
+    has_depth: [bool; FRAME_CAPACITY],
     /// Grouping: a depthless feature with no stereo neighbour.
     unattached: [bool; FRAME_CAPACITY],
     /// Grouping, per depthless group root: squared pixel distance to, and index of, the
@@ -384,6 +390,7 @@ impl MotionScratch {
             n_bad: [0; FRAME_CAPACITY],
             lo_sum: [0.0; FRAME_CAPACITY],
             n_lm: [0; FRAME_CAPACITY],
+            has_depth: [false; FRAME_CAPACITY],
             unattached: [false; FRAME_CAPACITY],
             join_d2: [f32::INFINITY; FRAME_CAPACITY],
             join_to: [0; FRAME_CAPACITY],
@@ -1029,6 +1036,14 @@ impl MotionScratch {
                 self.n_bad[r] = 0;
                 self.lo_sum[r] = 0.0;
                 self.n_lm[r] = 0;
+                self.has_depth[r] = false;
+            }
+        }
+        for k in 0..n {
+            let i = usize::from(self.dyn_idx[k]);
+            if feats[i].is_stereo() {
+                let r = self.find(i);
+                self.has_depth[r] = true;
             }
         }
         // Evidence of this frame, per segment.
@@ -1083,10 +1098,15 @@ impl MotionScratch {
             self.state[i] = state;
             // Moving objects make no landmarks; an unproven object's matched features do not
             // duplicate the landmark they matched, and its others make landmarks only while it
-            // is more likely parked than moving.
+            // is more likely parked than moving, and, while nothing of it is measured, only if
+            // some of it has stereo depth.
             self.blocked[i] = match state {
                 FeatureMotion::Moving => true,
-                FeatureMotion::Unproven => self.cand[i] != NO_LANDMARK || post >= MOVING_LOGIT,
+                FeatureMotion::Unproven => {
+                    self.cand[i] != NO_LANDMARK
+                        || post >= MOVING_LOGIT
+                        || (evidence == 0 && !self.has_depth[r])
+                }
                 _ => false,
             };
             if i == r {
@@ -1222,8 +1242,8 @@ mod tests {
 
     /// A parked car (consistent matches) is used, a moving one (inconsistent) removed, and a
     /// pedestrian and a car without matches stay unproven: the car (more likely parked than
-    /// moving) may make landmarks, the pedestrian (as likely moving) may not. The landmarks
-    /// accumulate the evidence.
+    /// moving) may make landmarks, the pedestrian (as likely moving) may not, nor a car none of
+    /// whose features has stereo depth. The landmarks accumulate the evidence.
     #[test]
     fn decisions_follow_the_evidence() {
         let mut s = std::boxed::Box::new(MotionScratch::new());
@@ -1240,6 +1260,10 @@ mod tests {
         }
         for k in 0..3 {
             feats.push(feat(1400.0 + 10.0 * k as f32, 100.0, 12.0, 8)); // unmatched car
+        }
+        feats.push(feat(1435.0, 100.0, 0.0, 8)); // its depthless feature
+        for k in 0..3 {
+            feats.push(feat(200.0 + 10.0 * k as f32, 300.0, 0.0, 8)); // car without depth
         }
         let mut lo = [0.0f32; 16];
         let frame = |s: &mut MotionScratch, lo: &mut [f32; 16]| {
@@ -1258,31 +1282,32 @@ mod tests {
         // One frame of consistent matches is not yet enough to call a car parked; one frame
         // of inconsistent ones calls the other moving.
         let rep = frame(&mut s, &mut lo);
-        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (0, 5, 11));
+        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (0, 5, 15));
         assert!(lo[..5].iter().all(|&l| (l + p.max_frame_llr).abs() < 1e-6));
         let rep = frame(&mut s, &mut lo);
-        assert_eq!(rep.segments, 4);
+        assert_eq!(rep.segments, 5);
         assert_eq!(rep.parked_segments, 1);
         assert_eq!(rep.moving_segments, 1);
-        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (5, 5, 6));
+        assert_eq!((rep.parked_features, rep.moving_features, rep.unproven_features), (5, 5, 10));
         assert!(s.state[..5].iter().all(|&m| m == FeatureMotion::Parked));
         assert!(s.state[5..10].iter().all(|&m| m == FeatureMotion::Moving));
-        assert!(s.state[10..16].iter().all(|&m| m == FeatureMotion::Unproven));
-        assert!(s.blocked[5..13].iter().all(|&b| b));
-        assert!(!s.blocked[..5].iter().any(|&b| b) && !s.blocked[13..16].iter().any(|&b| b));
+        assert!(s.state[10..20].iter().all(|&m| m == FeatureMotion::Unproven));
+        assert!(s.blocked[5..13].iter().all(|&b| b) && s.blocked[17..20].iter().all(|&b| b));
+        assert!(!s.blocked[..5].iter().any(|&b| b) && !s.blocked[13..17].iter().any(|&b| b));
         // Clamped frame evidence went to each landmark, twice.
         assert!(lo[..5].iter().all(|&l| (l + 2.0 * p.max_frame_llr).abs() < 1e-6));
         assert!(lo[5..10].iter().all(|&l| (l - 2.0 * p.max_frame_llr).abs() < 1e-6));
         assert_eq!(s.cand[12], NO_LANDMARK);
         // The objects as `segment_of` reports them: one id per object, its measured features.
         let seg: std::vec::Vec<MotionSegment> =
-            (0..13).map(|i| s.segment_of(i).expect("dynamic class")).collect();
+            (0..16).map(|i| s.segment_of(i).expect("dynamic class")).collect();
         for (range, measured) in [(0..5, 5), (5..10, 5), (10..13, 0)] {
             let id = seg[range.start].id;
             assert!(seg[range].iter().all(|g| g.id == id && g.measured == measured));
         }
         assert!(seg[0].id != seg[5].id && seg[5].id != seg[10].id && seg[0].id != seg[10].id);
-        assert_eq!(s.segment_of(16), None, "beyond the frame's features");
+        assert_eq!(s.segment_of(16).map(|g| g.id), Some(seg[13].id), "joined its car");
+        assert_eq!(s.segment_of(20), None, "beyond the frame's features");
         s.reset(feats.len());
         assert_eq!(s.segment_of(0), None, "no motion test on this frame yet");
     }

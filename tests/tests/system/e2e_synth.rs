@@ -209,14 +209,15 @@ fn motion_aware_semantics_find_the_moving_traffic() {
     let (wp, wr) = (m.withheld_precision.unwrap(), m.withheld_recall.unwrap());
     assert_eq!(wr, f64::from(c.true_pos - c.deferred_true) / f64::from(c.true_pos + c.false_neg));
     eprintln!("high: withheld from pose or map: precision {wp:.3}, recall {wr:.3}; deferred {} ({} on moving objects)", c.deferred, c.deferred_true);
-    // 0.934 / 0.883 measured (6946 deferred, 3680 of them on moving objects): what is withheld
-    // is on moving objects more often than what is removed, and an eighth of the moving
-    // features are deferred (first sight of a car, or nothing of it re-found, like a parked
-    // car's). 0.931 / 0.786 (7048 deferred on moving objects) before the epipolar test and its
-    // chains, bounded by the road and the class's height; 0.931 / 0.849 before untested people
-    // stopped making landmarks.
+    // 0.927 / 0.927 measured (4950 deferred, 2092 of them on moving objects): what is withheld
+    // is on moving objects more often than what is removed, and one moving feature in fourteen
+    // is deferred (first sight of a car with stereo depth, or nothing of it re-found, like a
+    // parked car's). 0.931 / 0.786 (7048 deferred on moving objects) before the epipolar test
+    // and its chains, bounded by the road and the class's height; 0.931 / 0.849 before
+    // untested people stopped making landmarks; 0.934 / 0.883 (3680) before untested objects
+    // without any stereo depth did.
     assert!(wp >= 0.92 && wp > p, "withheld precision {wp:.3} (removed: {p:.3})");
-    assert!(wr >= 0.86 && wr < r, "withheld recall {wr:.3} (removed: {r:.3})");
+    assert!(wr >= 0.9 && wr < r, "withheld recall {wr:.3} (removed: {r:.3})");
     // Every wrongly removed feature has exactly one cause.
     let causes = [c.false_pos_joined, c.false_pos_tested, c.false_pos_pending, c.false_pos_unseen];
     eprintln!(
