@@ -386,11 +386,12 @@ impl Tracker {
     }
 
     /// Which features of the last processed frame the motion test kept from making a landmark
-    /// (moving ones, and unproven ones matched to the landmark they would duplicate); all
-    /// `false` when motion-aware semantics are off. An unproven feature matched to no landmark
-    /// is not blocked: it had no match to hold out of the pose, and the landmark it may make is
-    /// tested like any other dynamic-class landmark before it is used, so it is treated exactly
-    /// as a parked car's feature would be.
+    /// (moving ones, and unproven ones matched to the landmark they would duplicate, on an
+    /// object as likely moving as not, or on an object nothing of which is measured or has
+    /// stereo depth); all `false` when motion-aware semantics are off. Any other unproven
+    /// feature is not blocked: it had no match to hold out of the pose, and the landmark it may
+    /// make is tested like any other dynamic-class landmark before it is used, so it is treated
+    /// exactly as a parked car's feature would be.
     pub fn feature_blocked(&self) -> &[bool] {
         &self.motion.blocked[..self.last_features.min(FRAME_CAPACITY)]
     }

@@ -352,7 +352,7 @@ pub fn table(rows: &[Row]) -> String {
         let _ = writeln!(
             s,
             "\nmoving features, precision / recall [%]: removed (moving or unproven) / withheld \
-             from pose or map (unproven features matched to no landmark count as kept) / tested \
+             from pose or map (unproven features free to make a landmark count as kept) / tested \
              moving"
         );
         for (r, c) in &checks {

@@ -187,9 +187,10 @@ pub struct FrameRecord {
 /// is a feature the motion test removed (moving or unproven, [`FeatureMotion::removed`]); a
 /// feature is truly moving when the mask is set at its key point.
 ///
-/// Of the removed features, the *deferred* ones (unproven and matched to no landmark) are
-/// treated as a parked car's features are: they had no match to hold out of the pose and may
-/// make a landmark, which is tested before it is used. Counting them as kept gives the
+/// Of the removed features, the *deferred* ones (unproven and free to make a landmark: matched
+/// to no landmark, on an object more likely parked than moving and, until it is measured, with
+/// some stereo depth) are treated as a parked car's features are: they had no match to hold
+/// out of the pose and may make a landmark, which is tested before it is used. Counting them as kept gives the
 /// precision and recall of what the motion test actually withholds from the pose and the
 /// map ([`MovingCheck::withheld_precision`]).
 ///
@@ -222,7 +223,7 @@ pub struct MovingCheck {
     /// Of `false_pos`: on such an object, none of whose features could be measured on this
     /// frame (seen for the first time, or nothing re-found): unproven.
     pub false_pos_unseen: u32,
-    /// Of `true_pos + false_pos`: unproven and matched to no landmark, so neither held out of
+    /// Of `true_pos + false_pos`: unproven and free to make a landmark, so neither held out of
     /// the pose nor kept from making a landmark ([`semloc_core::tracker::Tracker::feature_blocked`]).
     pub deferred: u32,
     /// Of `deferred`, on a moving object.

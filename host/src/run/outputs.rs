@@ -207,7 +207,7 @@ pub struct MotionSummary {
     /// Against the source's moving-object mask, when it has one (`semloc synth`'s `dynamic/`):
     /// the summed counts, precision and recall of "removed" (moving or unproven), and of the
     /// "moving" verdict alone (tested moving; unproven features left out), and of "withheld"
-    /// (kept out of the pose or the map: removed, less the unproven features matched to no
+    /// (kept out of the pose or the map: removed, less the unproven features free to make a
     /// landmark, which are treated as parked ones are).
     pub moving_check: Option<MovingCheck>,
     pub moving_precision: Option<f64>,

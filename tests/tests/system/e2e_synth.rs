@@ -205,7 +205,7 @@ fn motion_aware_semantics_find_the_moving_traffic() {
     // precision is 0.83-0.92.
     assert!(tested_p >= 0.9, "of the features tested moving only {tested_p:.3} move");
     // Withheld from the pose or the map: the removed features less the deferred ones
-    // (unproven, matched to no landmark), which are treated as a parked car's are.
+    // (unproven, free to make a landmark), which are treated as a parked car's are.
     let (wp, wr) = (m.withheld_precision.unwrap(), m.withheld_recall.unwrap());
     assert_eq!(wr, f64::from(c.true_pos - c.deferred_true) / f64::from(c.true_pos + c.false_neg));
     eprintln!("high: withheld from pose or map: precision {wp:.3}, recall {wr:.3}; deferred {} ({} on moving objects)", c.deferred, c.deferred_true);
