@@ -139,8 +139,8 @@ struct JsonRow<'a> {
     /// sequence's moving-object mask (synthetic sequences), else null.
     moving_precision: Option<f64>,
     moving_recall: Option<f64>,
-    /// The same for the withheld features (removed less the deferred: unproven and matched to
-    /// no landmark, which are treated as parked ones are).
+    /// The same for the withheld features (removed less the deferred: unproven and free to
+    /// make a landmark, which are treated as parked ones are).
     withheld_precision: Option<f64>,
     withheld_recall: Option<f64>,
     /// The same for the "moving" verdict alone (unproven features left out).
@@ -372,29 +372,31 @@ pub fn table(rows: &[Row]) -> String {
             );
         }
     }
-    let causes: Vec<(&Row, &MovingCheck)> =
-        checks.into_iter().filter(|(_, c)| c.false_pos > 0).collect();
-    if !causes.is_empty() {
-        let _ = writeln!(
-            s,
-            "\nwrongly removed features (on no moving object), by cause: joined to a moving \
-             object / parked object tested moving / measured, evidence pending / not yet measured"
-        );
-        for (r, c) in causes {
-            let pct = |v: u32| 100.0 * f64::from(v) / f64::from(c.false_pos);
-            let _ = writeln!(
-                s,
-                "  {} / {}: {} features: {:.0} / {:.0} / {:.0} / {:.0} %",
-                r.semantics.name(),
-                association_name(r.assoc),
-                c.false_pos,
-                pct(c.false_pos_joined),
-                pct(c.false_pos_tested),
-                pct(c.false_pos_pending),
-                pct(c.false_pos_unseen),
-            );
-        }
-    }
+    write_shares(
+        &mut s,
+        "wrongly removed features (on no moving object), by cause: joined to a moving object / \
+         parked object tested moving / measured, evidence pending / not yet measured",
+        labelled(&checks),
+        |c| {
+            let parts = vec![
+                c.false_pos_joined,
+                c.false_pos_tested,
+                c.false_pos_pending,
+                c.false_pos_unseen,
+            ];
+            (c.false_pos, parts, None)
+        },
+    );
+    write_shares(
+        &mut s,
+        "deferred features on moving objects (the withheld recall's loss), by cause: measured, \
+         evidence pending / not yet measured; and the share without stereo depth",
+        labelled(&checks),
+        |c| {
+            let parts = vec![c.deferred_true_pending, c.deferred_true_unseen];
+            (c.deferred_true, parts, Some(c.deferred_true_depthless))
+        },
+    );
     if seeds >= 2 {
         let _ = writeln!(
             s,
@@ -404,6 +406,39 @@ pub fn table(rows: &[Row]) -> String {
         );
     }
     s
+}
+
+/// Each motion check with its row's label (`semantics / assoc`).
+fn labelled<'c>(
+    checks: &'c [(&Row, &'c MovingCheck)],
+) -> impl Iterator<Item = (String, &'c MovingCheck)> + 'c {
+    checks
+        .iter()
+        .map(|(r, c)| (format!("{} / {}", r.semantics.name(), association_name(r.assoc)), *c))
+}
+
+/// Under `header`, one line per row whose `split` total is not 0: the total and each part's
+/// share of it (`a / b / ... %`), then the share of the optional depthless count.
+fn write_shares<'c>(
+    s: &mut String,
+    header: &str,
+    checks: impl IntoIterator<Item = (String, &'c MovingCheck)>,
+    split: impl Fn(&MovingCheck) -> (u32, Vec<u32>, Option<u32>),
+) {
+    let mut header = Some(header);
+    for (row, c) in checks {
+        let (total, parts, depthless) = split(c);
+        if total == 0 {
+            continue;
+        }
+        if let Some(h) = header.take() {
+            let _ = writeln!(s, "\n{h}");
+        }
+        let pct = |v: u32| format!("{:.0}", 100.0 * f64::from(v) / f64::from(total));
+        let shares: Vec<String> = parts.into_iter().map(pct).collect();
+        let tail = depthless.map_or(String::new(), |d| format!(", {} % depthless", pct(d)));
+        let _ = writeln!(s, "  {row}: {total} features: {} %{tail}", shares.join(" / "));
+    }
 }
 
 /// Precision and recall of a motion-aware row's removed features against the moving mask.
@@ -746,4 +781,41 @@ pub fn ablate_outputs() -> Vec<String> {
         }
     }
     v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each row's parts as shares of its total, rows with a total of 0 left out, and the
+    /// header only above a row.
+    #[test]
+    fn shares_are_written_per_row_with_their_header() {
+        let a = MovingCheck {
+            deferred_true: 8,
+            deferred_true_pending: 6,
+            deferred_true_unseen: 2,
+            deferred_true_depthless: 4,
+            ..Default::default()
+        };
+        let none = MovingCheck::default();
+        let split = |c: &MovingCheck| {
+            (
+                c.deferred_true,
+                vec![c.deferred_true_pending, c.deferred_true_unseen],
+                Some(c.deferred_true_depthless),
+            )
+        };
+        let mut s = String::new();
+        write_shares(
+            &mut s,
+            "head",
+            [("x / hard".to_owned(), &a), ("x / em".to_owned(), &none)],
+            split,
+        );
+        assert_eq!(s, "\nhead\n  x / hard: 8 features: 75 / 25 %, 50 % depthless\n");
+        let mut s = String::new();
+        write_shares(&mut s, "head", [("x / em".to_owned(), &none)], split);
+        assert_eq!(s, "");
+    }
 }

@@ -197,7 +197,8 @@ pub struct FrameRecord {
 /// The wrongly removed features (`false_pos`) are split by why they were removed, from the
 /// object the motion test grouped them into ([`semloc_core::tracker::Tracker::feature_segment`]):
 /// `false_pos_joined` + `false_pos_tested` + `false_pos_pending` + `false_pos_unseen` =
-/// `false_pos`.
+/// `false_pos`. The deferred features on moving objects, the recall that "withheld" loses, are
+/// split the same way: `deferred_true_pending` + `deferred_true_unseen` = `deferred_true`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct MovingCheck {
     /// Removed and on a moving object.
@@ -228,6 +229,14 @@ pub struct MovingCheck {
     pub deferred: u32,
     /// Of `deferred`, on a moving object.
     pub deferred_true: u32,
+    /// Of `deferred_true`: its object measured on this frame, without the evidence yet to be
+    /// called moving.
+    pub deferred_true_pending: u32,
+    /// Of `deferred_true`: nothing of its object measured on this frame (seen for the first
+    /// time, or nothing re-found).
+    pub deferred_true_unseen: u32,
+    /// Of `deferred_true`: the feature has no stereo depth (whichever of the two above).
+    pub deferred_true_depthless: u32,
 }
 
 impl MovingCheck {
@@ -245,6 +254,9 @@ impl MovingCheck {
         self.false_pos_unseen += o.false_pos_unseen;
         self.deferred += o.deferred;
         self.deferred_true += o.deferred_true;
+        self.deferred_true_pending += o.deferred_true_pending;
+        self.deferred_true_unseen += o.deferred_true_unseen;
+        self.deferred_true_depthless += o.deferred_true_depthless;
     }
     /// Precision of "called moving" (NaN when nothing was called moving).
     pub fn precision(&self) -> f64 {
@@ -341,7 +353,15 @@ fn score_moving(
         }
         if st == FeatureMotion::Unproven && !blocked[i] {
             c.deferred += 1;
-            c.deferred_true += u32::from(truth);
+            if truth {
+                c.deferred_true += 1;
+                if segment(i).is_some_and(|s| s.measured > 0) {
+                    c.deferred_true_pending += 1;
+                } else {
+                    c.deferred_true_unseen += 1;
+                }
+                c.deferred_true_depthless += u32::from(!feats[i].is_stereo());
+            }
         }
         if st == FeatureMotion::Moving {
             c.tested_moving += 1;
@@ -904,7 +924,8 @@ mod tests {
     }
 
     /// Each wrongly removed feature lands in exactly one cause, from its object: joined to a
-    /// moving one, tested moving, pending (measured, unproven) or unseen (unmeasured).
+    /// moving one, tested moving, pending (measured, unproven) or unseen (unmeasured); each
+    /// deferred feature on a moving object in pending or unseen.
     #[test]
     fn wrongly_removed_features_are_split_by_cause() {
         use FeatureMotion::*;
@@ -912,7 +933,7 @@ mod tests {
         let mask = GrayImage::from_fn(40, 10, |x, _| Luma([if x < 10 { 255 } else { 0 }]));
         // (x, state, object, blocked: kept from making a landmark)
         type Case = (f32, FeatureMotion, Option<(u16, u32)>, bool);
-        let cases: [Case; 10] = [
+        let cases: [Case; 11] = [
             (2.0, Moving, Some((0, 5)), true),     // true positive of object 0
             (12.0, Moving, Some((0, 5)), true),    // static, joined to object 0: joined
             (14.0, Moving, Some((2, 4)), true),    // static object 2 tested moving
@@ -920,28 +941,34 @@ mod tests {
             (18.0, Unproven, Some((4, 0)), false), // static object 4, nothing measured: unseen, deferred
             (20.0, Parked, Some((5, 6)), false),   // kept, static: not counted
             (4.0, Parked, Some((6, 6)), false),    // kept, moving: false negative
-            (6.0, Unproven, Some((7, 0)), false),  // removed, moving: true positive, deferred
-            (30.0, Static, None, false),           // static class: not counted
-            (8.0, Static, None, false),            // static class on the mask: false negative
+            (6.0, Unproven, Some((7, 0)), false), // removed, moving: true positive, deferred, unseen
+            (7.0, Unproven, Some((8, 3)), false), // the same, its object measured: pending (stereo)
+            (30.0, Static, None, false),          // static class: not counted
+            (8.0, Static, None, false),           // static class on the mask: false negative
         ];
-        let feats: Vec<Feature> = cases.iter().map(|c| feat(c.0, 5.0)).collect();
+        let mut feats: Vec<Feature> = cases.iter().map(|c| feat(c.0, 5.0)).collect();
+        (feats[7].ur, feats[7].depth_m) = (1.0, 20.0);
         let states: Vec<FeatureMotion> = cases.iter().map(|c| c.1).collect();
         let blocked: Vec<bool> = cases.iter().map(|c| c.3).collect();
         let seg = |i: usize| cases[i].2.map(|(id, measured)| MotionSegment { id, measured });
         let c = score_moving(&feats, &states, &blocked, seg, &mask);
-        assert_eq!((c.true_pos, c.false_pos, c.false_neg), (2, 4, 2));
+        assert_eq!((c.true_pos, c.false_pos, c.false_neg), (3, 4, 2));
         assert_eq!(
             (c.false_pos_joined, c.false_pos_tested, c.false_pos_pending, c.false_pos_unseen),
             (1, 1, 1, 1)
         );
         assert_eq!((c.tested_moving, c.tested_moving_true, c.tested_parked_moving), (3, 1, 1));
-        // Withheld: the two deferred features (one on the mask) count as kept.
-        assert_eq!((c.deferred, c.deferred_true), (2, 1));
-        assert_eq!((c.precision(), c.recall()), (2.0 / 6.0, 2.0 / 4.0));
-        assert_eq!((c.withheld_precision(), c.withheld_recall()), (1.0 / 4.0, 1.0 / 4.0));
+        // Withheld: the three deferred features (two on the mask) count as kept.
+        assert_eq!((c.deferred, c.deferred_true), (3, 2));
+        assert_eq!(
+            (c.deferred_true_pending, c.deferred_true_unseen, c.deferred_true_depthless),
+            (1, 1, 1)
+        );
+        assert_eq!((c.precision(), c.recall()), (3.0 / 7.0, 3.0 / 5.0));
+        assert_eq!((c.withheld_precision(), c.withheld_recall()), (1.0 / 4.0, 1.0 / 5.0));
         let mut sum = c;
         sum.add(&c);
         assert_eq!((sum.false_pos, sum.false_pos_joined, sum.false_pos_unseen), (8, 2, 2));
-        assert_eq!((sum.deferred, sum.deferred_true), (4, 2));
+        assert_eq!((sum.deferred, sum.deferred_true, sum.deferred_true_pending), (6, 4, 2));
     }
 }
