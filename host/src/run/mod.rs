@@ -331,18 +331,20 @@ fn score_moving(
     let mut c = MovingCheck::default();
     for i in 0..n {
         let (st, truth) = (states[i], truth[i]);
+        // Its object, and whether anything of it was measured on this frame.
+        let seg = segment(i);
+        let measured = seg.is_some_and(|s| s.measured > 0);
         match (st.removed(), truth) {
             (true, true) => c.true_pos += 1,
             (true, false) => {
                 c.false_pos += 1;
-                let seg = segment(i);
                 let joined = seg
                     .is_some_and(|s| has_moving.get(usize::from(s.id)).copied().unwrap_or(false));
                 if joined {
                     c.false_pos_joined += 1;
                 } else if st == FeatureMotion::Moving {
                     c.false_pos_tested += 1;
-                } else if seg.is_some_and(|s| s.measured > 0) {
+                } else if measured {
                     c.false_pos_pending += 1;
                 } else {
                     c.false_pos_unseen += 1;
@@ -355,7 +357,7 @@ fn score_moving(
             c.deferred += 1;
             if truth {
                 c.deferred_true += 1;
-                if segment(i).is_some_and(|s| s.measured > 0) {
+                if measured {
                     c.deferred_true_pending += 1;
                 } else {
                     c.deferred_true_unseen += 1;

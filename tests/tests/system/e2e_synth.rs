@@ -215,10 +215,10 @@ fn motion_aware_semantics_find_the_moving_traffic() {
     // is on moving objects more often than what is removed, and one moving feature in fourteen
     // is deferred, like a parked car's: 1297 of those 2092 on objects measured whose evidence
     // is not yet enough to call them moving, 795 on objects nothing of which was measured
-    // (first sight, or nothing re-found). 0.931 / 0.786 (7048 deferred on moving objects) before the epipolar test
-    // and its chains, bounded by the road and the class's height; 0.931 / 0.849 before
-    // untested people stopped making landmarks; 0.934 / 0.883 (3680) before untested objects
-    // without any stereo depth did.
+    // (first sight, or nothing re-found). 0.931 / 0.786 (7048 deferred on moving objects)
+    // before the epipolar test and its chains, bounded by the road and the class's height;
+    // 0.931 / 0.849 before untested people stopped making landmarks; 0.934 / 0.883 (3680)
+    // before untested objects without any stereo depth did.
     assert!(wp >= 0.92 && wp > p, "withheld precision {wp:.3} (removed: {p:.3})");
     assert!(wr >= 0.9 && wr < r, "withheld recall {wr:.3} (removed: {r:.3})");
     // Every wrongly removed feature has exactly one cause.
