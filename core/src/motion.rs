@@ -173,15 +173,6 @@ pub const MOVING_LOGIT: f32 = 0.0;
 /// Evidence of one consistent measurement, `ln(0.25 / 0.85)`: a moving object's match still
 /// passes the gate one time in four (slow, or moving along the ray).
 pub const LLR_CONSISTENT: f32 = -1.223_775_4;
-/// Evidence of one consistent measurement by the depthless test (a feature without stereo
-/// depth matched to the previous frame where it would be at a neighbouring object's depth),
-/// `ln(0.12 / 0.22)`. Only a pass is recorded (a miss may be a feature of another object) and
-/// the test tries up to [`MAX_HYPOTHESES`] depths, each with the object's extent along the
-/// epipolar line, so a moving object's depthless feature passes it too: on synthetic `high`
-/// (seeds 3, 5, 7) and `parked` (seeds 1-3), 11.5 % of the depthless features it tried on
-/// moving objects passed against 22.1 % of those on objects that stood still, a likelihood
-/// ratio of about one half rather than [`LLR_CONSISTENT`]'s 0.29.
-pub const LLR_DEPTHLESS_CONSISTENT: f32 = -0.606_135_8;
 /// Evidence of one inconsistent measurement, `ln(0.75 / 0.15)`: a static object's match fails
 /// the gate one time in seven (repeated texture on cars, mismatches at borders).
 pub const LLR_INCONSISTENT: f32 = 1.609_438;
@@ -356,6 +347,10 @@ pub(crate) struct MotionScratch {
     /// nearest attached feature.
     join_d2: [f32; FRAME_CAPACITY],
     join_to: [u16; FRAME_CAPACITY],
+    /// Per feature: whether its pass of the depthless test could have told its object from
+    /// one moving with the camera, i.e. the same match with no image motion at all would have
+    /// failed the test at the depth it passed at. Only such a pass is evidence.
+    dl_informative: [bool; FRAME_CAPACITY],
     /// Frame to frame: the moving log-odds of the previous-frame feature this feature matched
     /// (NaN if none; only for features without a landmark match).
     prev_lo: [f32; FRAME_CAPACITY],
@@ -403,6 +398,7 @@ impl MotionScratch {
             unattached: [false; FRAME_CAPACITY],
             join_d2: [f32::INFINITY; FRAME_CAPACITY],
             join_to: [0; FRAME_CAPACITY],
+            dl_informative: [false; FRAME_CAPACITY],
             prev_lo: [f32::NAN; FRAME_CAPACITY],
             lo_out: [0.0; FRAME_CAPACITY],
             prev: Vec::new(),
@@ -426,6 +422,7 @@ impl MotionScratch {
         self.blocked[..n].fill(false);
         self.prev_lo[..n].fill(f32::NAN);
         self.prev_of[..n].fill(NO_CLAIM);
+        self.dl_informative[..n].fill(false);
         self.lo_out[..n].fill(0.0);
     }
 
@@ -861,11 +858,7 @@ impl MotionScratch {
                 continue;
             }
             let (c, d) = pred[k];
-            let (rx, ry) = (f64::from(p.uv[0]) - c[0], f64::from(p.uv[1]) - c[1]);
-            // Σ = s2 I + d dᵀ
-            let (a, b, cc) = (s2 + d[0] * d[0], d[0] * d[1], s2 + d[1] * d[1]);
-            let det = a * cc - b * b;
-            let chi = (cc * rx * rx - 2.0 * b * rx * ry + a * ry * ry) / det;
+            let chi = mahalanobis2(s2, d, f64::from(p.uv[0]) - c[0], f64::from(p.uv[1]) - c[1]);
             if win.is_none_or(|(w, _)| chi < w) {
                 win = Some((chi, k));
             }
@@ -878,6 +871,12 @@ impl MotionScratch {
             // neighbours whose depths were tried.
             return None;
         }
+        // Would a match that had not moved in the image have passed too? Then so would an
+        // object moving with the camera (a car ahead near the focus of expansion, anything
+        // far): the pass cannot tell it from a parked one.
+        let (c, d) = pred[k];
+        let chi_still = mahalanobis2(s2, d, f64::from(fa.x) - c[0], f64::from(fa.y) - c[1]);
+        self.dl_informative[ia] = chi_still > gate;
         self.prev_lo[ia] = p.lo;
         self.prev_of[ia] = nearest.at as u16;
         self.chi2[ia] = chi as f32;
@@ -1064,11 +1063,12 @@ impl MotionScratch {
             let r = self.find(i);
             if self.consistent(i) {
                 self.n_ok[r] = self.n_ok[r].saturating_add(1);
-                self.ev[r] += if self.cand[i] == NO_LANDMARK && !feats[i].is_stereo() {
-                    LLR_DEPTHLESS_CONSISTENT
-                } else {
-                    LLR_CONSISTENT
-                };
+                // A pass of the depthless test (the only consistent measurement of a feature
+                // without a landmark or stereo depth) is evidence only where a feature that
+                // had not moved in the image would have failed.
+                let depthless = self.cand[i] == NO_LANDMARK && !feats[i].is_stereo();
+                self.ev[r] +=
+                    if depthless && !self.dl_informative[i] { 0.0 } else { LLR_CONSISTENT };
             } else {
                 self.n_bad[r] = self.n_bad[r].saturating_add(1);
                 self.ev[r] += LLR_INCONSISTENT;
@@ -1138,6 +1138,14 @@ impl MotionScratch {
         }
         rep
     }
+}
+
+/// Squared Mahalanobis distance of the image residual (`rx`, `ry`) under Σ = `s2` I + d dᵀ: the
+/// feature's isotropic noise and its object's depth extent along the epipolar line `d`.
+fn mahalanobis2(s2: f64, d: [f64; 2], rx: f64, ry: f64) -> f64 {
+    let (a, b, c) = (s2 + d[0] * d[0], d[0] * d[1], s2 + d[1] * d[1]);
+    let det = a * c - b * b;
+    (c * rx * rx - 2.0 * b * rx * ry + a * ry * ry) / det
 }
 
 /// The ray through pixel (`u`, `v`) of a camera at `t_wc` (world from camera), for a feature
@@ -1353,22 +1361,22 @@ mod tests {
         assert_eq!(rep.parked_features, 8);
     }
 
-    /// A depthless feature that passed the depthless test is weaker evidence that its object
-    /// stands still than a stereo match that passed: one inconsistent stereo match outweighs
-    /// two depthless passes, but not two stereo ones.
+    /// A pass of the depthless test is evidence of standing still only where a feature that
+    /// had not moved in the image would have failed: one inconsistent stereo match outweighs
+    /// two passes that could not tell, but not two that could.
     #[test]
-    fn a_depthless_pass_is_weak_evidence_of_standing_still() {
+    fn a_depthless_pass_counts_only_where_it_could_have_seen_motion() {
         let p = MotionParams::default();
         let cam = crate::testing::kitti_cam();
-        // One car: a stereo feature that failed its frame-to-frame test and two others that
-        // passed, with stereo depth or (by the depthless test) without.
-        let frame_evidence = |depth_of_passes: f32| {
+        // One car: a stereo feature that failed its frame-to-frame test and two depthless
+        // features that passed the depthless test.
+        let frame_evidence = |informative: bool| {
             let mut s = std::boxed::Box::new(MotionScratch::new());
             let feats = [
                 feat(100.0, 100.0, 10.0, 8),
                 feat(110.0, 100.0, 10.0, 8),
-                feat(105.0, 108.0, depth_of_passes, 8),
-                feat(115.0, 108.0, depth_of_passes, 8),
+                feat(105.0, 108.0, 0.0, 8),
+                feat(115.0, 108.0, 0.0, 8),
             ];
             s.reset(feats.len());
             for i in 1..4 {
@@ -1376,18 +1384,43 @@ mod tests {
                 s.gate[i] = 5.99;
                 s.chi2[i] = if i == 1 { 60.0 } else { 1.0 };
             }
+            s.dl_informative[2..4].fill(informative);
             let rep = s.decide(&feats, &cam, &Se3::IDENTITY, &p, |_, e| e);
             assert_eq!(rep.segments, 1);
+            assert!((1..4).all(|i| s.measured(i)));
             s.lo_out[1]
         };
-        let stereo = frame_evidence(10.0);
-        let depthless = frame_evidence(0.0);
-        assert!((stereo - (LLR_INCONSISTENT + 2.0 * LLR_CONSISTENT)).abs() < 1e-5, "{stereo}");
-        assert!(
-            (depthless - (LLR_INCONSISTENT + 2.0 * LLR_DEPTHLESS_CONSISTENT)).abs() < 1e-5,
-            "{depthless}"
-        );
-        assert!(stereo < 0.0 && depthless > 0.0);
+        let could = frame_evidence(true);
+        let could_not = frame_evidence(false);
+        assert!((could - (LLR_INCONSISTENT + 2.0 * LLR_CONSISTENT)).abs() < 1e-5, "{could}");
+        assert!((could_not - p.max_frame_llr).abs() < 1e-6, "{could_not}");
+    }
+
+    /// The depthless test on a car ahead near the focus of expansion, driving at the camera's
+    /// speed: its depthless feature does not move in the image and passes at the car's depth,
+    /// but a parked car there would barely have moved either, so the pass is no evidence.
+    #[test]
+    fn a_car_ahead_at_our_speed_passes_the_depthless_test_uninformatively() {
+        let cam = crate::testing::kitti_cam();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        let car: std::vec::Vec<Vector3<f64>> =
+            (0..3).map(|k| Vector3::new(-0.3 + 0.3 * f64::from(k), 0.2, 20.0)).collect();
+        let lone = Vector3::new(0.1, 0.3, 20.0);
+        let mut passes = std::vec::Vec::new();
+        for t in 0..3 {
+            let with_us = Vector3::new(0.0, 0.0, t as f64);
+            let mut feats: std::vec::Vec<Feature> = car
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| seen(&cam, &driving(t), q + with_us, 8, k as u8))
+                .collect();
+            let mut d = seen(&cam, &driving(t), lone + with_us, 8, 50);
+            (d.ur, d.depth_m) = (-1.0, -1.0);
+            feats.push(d);
+            landmarkless_frame(&mut s, &feats, t);
+            passes.push((s.consistent(3), s.dl_informative[3]));
+        }
+        assert_eq!(passes[1..], [(true, false), (true, false)], "{passes:?}");
     }
 
     /// A stereo feature of `class` seeing world point `p_w` from pose `t_cw`, with a
@@ -1571,6 +1604,9 @@ mod tests {
         assert_eq!(roots[1].0, 0, "{roots:?}");
         assert_eq!(roots[2], (0, Parked, Parked), "{roots:?}");
         assert!(s.consistent(lone_idx), "measured, and consistent, at the parked car's depth");
+        // 3.9 m to the side at 12 m, the parked car's point moves 21 px per frame: a pass there
+        // could have seen motion, and is evidence.
+        assert!(s.dl_informative[lone_idx]);
     }
 
     /// Objects without a single stereo feature (no depth to test them at): a car crossing
