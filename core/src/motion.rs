@@ -347,10 +347,11 @@ pub(crate) struct MotionScratch {
     /// nearest attached feature.
     join_d2: [f32; FRAME_CAPACITY],
     join_to: [u16; FRAME_CAPACITY],
-    /// Per feature: whether its pass of the depthless test could have told its object from
-    /// one moving with the camera, i.e. the same match with no image motion at all would have
-    /// failed the test at the depth it passed at. Only such a pass is evidence.
-    dl_informative: [bool; FRAME_CAPACITY],
+    /// Per feature: whether it passed the depthless test where the same match with no image
+    /// motion at all would have passed too (at the depth it passed at), so that the pass cannot
+    /// tell its object from one moving with the camera and is no evidence. Set by the test
+    /// itself, whatever else the feature was matched to (an unmeasured landmark candidate).
+    dl_uninformative: [bool; FRAME_CAPACITY],
     /// Frame to frame: the moving log-odds of the previous-frame feature this feature matched
     /// (NaN if none; only for features without a landmark match).
     prev_lo: [f32; FRAME_CAPACITY],
@@ -398,7 +399,7 @@ impl MotionScratch {
             unattached: [false; FRAME_CAPACITY],
             join_d2: [f32::INFINITY; FRAME_CAPACITY],
             join_to: [0; FRAME_CAPACITY],
-            dl_informative: [false; FRAME_CAPACITY],
+            dl_uninformative: [false; FRAME_CAPACITY],
             prev_lo: [f32::NAN; FRAME_CAPACITY],
             lo_out: [0.0; FRAME_CAPACITY],
             prev: Vec::new(),
@@ -422,7 +423,7 @@ impl MotionScratch {
         self.blocked[..n].fill(false);
         self.prev_lo[..n].fill(f32::NAN);
         self.prev_of[..n].fill(NO_CLAIM);
-        self.dl_informative[..n].fill(false);
+        self.dl_uninformative[..n].fill(false);
         self.lo_out[..n].fill(0.0);
     }
 
@@ -876,7 +877,7 @@ impl MotionScratch {
         // far): the pass cannot tell it from a parked one.
         let (c, d) = pred[k];
         let chi_still = mahalanobis2(s2, d, f64::from(fa.x) - c[0], f64::from(fa.y) - c[1]);
-        self.dl_informative[ia] = chi_still > gate;
+        self.dl_uninformative[ia] = chi_still <= gate;
         self.prev_lo[ia] = p.lo;
         self.prev_of[ia] = nearest.at as u16;
         self.chi2[ia] = chi as f32;
@@ -1063,12 +1064,9 @@ impl MotionScratch {
             let r = self.find(i);
             if self.consistent(i) {
                 self.n_ok[r] = self.n_ok[r].saturating_add(1);
-                // A pass of the depthless test (the only consistent measurement of a feature
-                // without a landmark or stereo depth) is evidence only where a feature that
-                // had not moved in the image would have failed.
-                let depthless = self.cand[i] == NO_LANDMARK && !feats[i].is_stereo();
-                self.ev[r] +=
-                    if depthless && !self.dl_informative[i] { 0.0 } else { LLR_CONSISTENT };
+                // A pass of the depthless test is evidence only where a feature that had not
+                // moved in the image would have failed.
+                self.ev[r] += if self.dl_uninformative[i] { 0.0 } else { LLR_CONSISTENT };
             } else {
                 self.n_bad[r] = self.n_bad[r].saturating_add(1);
                 self.ev[r] += LLR_INCONSISTENT;
@@ -1384,7 +1382,7 @@ mod tests {
                 s.gate[i] = 5.99;
                 s.chi2[i] = if i == 1 { 60.0 } else { 1.0 };
             }
-            s.dl_informative[2..4].fill(informative);
+            s.dl_uninformative[2..4].fill(!informative);
             let rep = s.decide(&feats, &cam, &Se3::IDENTITY, &p, |_, e| e);
             assert_eq!(rep.segments, 1);
             assert!((1..4).all(|i| s.measured(i)));
@@ -1394,6 +1392,30 @@ mod tests {
         let could_not = frame_evidence(false);
         assert!((could - (LLR_INCONSISTENT + 2.0 * LLR_CONSISTENT)).abs() < 1e-5, "{could}");
         assert!((could_not - p.max_frame_llr).abs() < 1e-6, "{could_not}");
+    }
+
+    /// A depthless feature that had a landmark candidate but no measurement of it is measured by
+    /// the depthless test; a pass that could not tell still adds nothing to its landmark.
+    #[test]
+    fn an_uninformative_depthless_pass_adds_nothing_to_a_landmark_either() {
+        let p = MotionParams::default();
+        let cam = crate::testing::kitti_cam();
+        let evidence_to_landmark = |uninformative: bool| {
+            let mut s = std::boxed::Box::new(MotionScratch::new());
+            let feats = [feat(100.0, 100.0, 10.0, 8), feat(105.0, 108.0, 0.0, 8)];
+            s.reset(feats.len());
+            (s.cand[1], s.prev_lo[1], s.gate[1], s.chi2[1]) = (7, 0.0, 5.99, 1.0);
+            s.dl_uninformative[1] = uninformative;
+            let mut sent = std::vec::Vec::new();
+            s.decide(&feats, &cam, &Se3::IDENTITY, &p, |id, e| {
+                sent.push((id, e));
+                e
+            });
+            sent
+        };
+        assert_eq!(evidence_to_landmark(true), [(7, 0.0)]);
+        // (The frame's evidence is clamped to ±max_frame_llr.)
+        assert_eq!(evidence_to_landmark(false), [(7, LLR_CONSISTENT.max(-p.max_frame_llr))]);
     }
 
     /// The depthless test on a car ahead near the focus of expansion, driving at the camera's
@@ -1418,7 +1440,7 @@ mod tests {
             (d.ur, d.depth_m) = (-1.0, -1.0);
             feats.push(d);
             landmarkless_frame(&mut s, &feats, t);
-            passes.push((s.consistent(3), s.dl_informative[3]));
+            passes.push((s.consistent(3), !s.dl_uninformative[3]));
         }
         assert_eq!(passes[1..], [(true, false), (true, false)], "{passes:?}");
     }
@@ -1606,7 +1628,7 @@ mod tests {
         assert!(s.consistent(lone_idx), "measured, and consistent, at the parked car's depth");
         // 3.9 m to the side at 12 m, the parked car's point moves 21 px per frame: a pass there
         // could have seen motion, and is evidence.
-        assert!(s.dl_informative[lone_idx]);
+        assert!(!s.dl_uninformative[lone_idx]);
     }
 
     /// Objects without a single stereo feature (no depth to test them at): a car crossing
