@@ -98,7 +98,7 @@ use nalgebra::Vector3;
 use crate::frame::{hamming, level_inv_sigma2, level_scale, Descriptor, Feature, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
 use crate::map::{measurement, NO_LANDMARK};
-use crate::optim::chi2;
+use crate::optim::{chi2, Measurement};
 use crate::seg::{category, is_dynamic, Category};
 
 /// Settings of the motion test.
@@ -247,6 +247,9 @@ struct PrevFeature {
     /// Depth (m) and level of the chain's first observation (its noise).
     anchor_depth: f32,
     anchor_level: u8,
+    /// The chain's first observation (u, v, right-image u; level-0 px): what this frame would
+    /// measure if the object had kept its place relative to the camera since then.
+    anchor_obs: [f32; 3],
     desc: Descriptor,
     level: u8,
     class: u8,
@@ -347,11 +350,12 @@ pub(crate) struct MotionScratch {
     /// nearest attached feature.
     join_d2: [f32; FRAME_CAPACITY],
     join_to: [u16; FRAME_CAPACITY],
-    /// Per feature: whether it passed the depthless test where the same match with no image
-    /// motion at all would have passed too (at the depth it passed at), so that the pass cannot
-    /// tell its object from one moving with the camera and is no evidence. Set by the test
-    /// itself, whatever else the feature was matched to (an unmeasured landmark candidate).
-    dl_uninformative: [bool; FRAME_CAPACITY],
+    /// Per feature: whether its frame-to-frame measurement could not tell its object from one
+    /// moving with the camera, so that a pass is no evidence: the depthless test's match with
+    /// no image motion at all, or the chain test's with the chain's first observation, would
+    /// have passed too. Set by the test itself, whatever else the feature was matched to (an
+    /// unmeasured landmark candidate).
+    uninformative: [bool; FRAME_CAPACITY],
     /// Frame to frame: the moving log-odds of the previous-frame feature this feature matched
     /// (NaN if none; only for features without a landmark match).
     prev_lo: [f32; FRAME_CAPACITY],
@@ -399,7 +403,7 @@ impl MotionScratch {
             unattached: [false; FRAME_CAPACITY],
             join_d2: [f32::INFINITY; FRAME_CAPACITY],
             join_to: [0; FRAME_CAPACITY],
-            dl_uninformative: [false; FRAME_CAPACITY],
+            uninformative: [false; FRAME_CAPACITY],
             prev_lo: [f32::NAN; FRAME_CAPACITY],
             lo_out: [0.0; FRAME_CAPACITY],
             prev: Vec::new(),
@@ -423,7 +427,7 @@ impl MotionScratch {
         self.blocked[..n].fill(false);
         self.prev_lo[..n].fill(f32::NAN);
         self.prev_of[..n].fill(NO_CLAIM);
-        self.dl_uninformative[..n].fill(false);
+        self.uninformative[..n].fill(false);
         self.lo_out[..n].fill(0.0);
     }
 
@@ -455,15 +459,18 @@ impl MotionScratch {
             // A feature matched to a stereo one continues its chain: the anchor stays where
             // the chain began.
             let link = usize::from(self.prev_of[i]);
-            let (anchor_w, anchor_depth, anchor_level) = match self.prev.get(link) {
-                Some(p) if link < self.prev_stereo => (p.anchor_w, p.anchor_depth, p.anchor_level),
-                _ => (p_w, f.depth_m, f.level),
+            let (anchor_w, anchor_depth, anchor_level, anchor_obs) = match self.prev.get(link) {
+                Some(p) if link < self.prev_stereo => {
+                    (p.anchor_w, p.anchor_depth, p.anchor_level, p.anchor_obs)
+                }
+                _ => (p_w, f.depth_m, f.level, [f.x, f.y, f.ur]),
             };
             let p = PrevFeature {
                 p_w,
                 anchor_w,
                 anchor_depth,
                 anchor_level,
+                anchor_obs,
                 desc: f.desc,
                 level: f.level,
                 class: f.class,
@@ -498,6 +505,7 @@ impl MotionScratch {
                 anchor_w,
                 anchor_depth,
                 anchor_level,
+                anchor_obs: [f.x, f.y, -1.0],
                 desc: f.desc,
                 level: f.level,
                 class: f.class,
@@ -595,10 +603,18 @@ impl MotionScratch {
             let var_anchor = grow2 * grow2 / level_inv_sigma2(p.anchor_level);
             z.inv_sigma2 = 1.0 / (1.0 / z.inv_sigma2 + var_anchor);
             self.prev_of[i] = j as u16;
-            if let Some(c) = chi2(cam, &t_cw.transform_point(&p.anchor_w), &z) {
+            let pred = t_cw.transform_point(&p.anchor_w);
+            if let Some(c) = chi2(cam, &pred, &z) {
                 self.prev_lo[i] = p.lo;
                 self.chi2[i] = c as f32;
-                self.gate[i] = z.chi2_threshold() as f32;
+                let gate = z.chi2_threshold();
+                self.gate[i] = gate as f32;
+                // Would an object that kept its place relative to the camera since the chain
+                // began (a car ahead at our speed) have passed too? Then the pass is no
+                // evidence of standing still.
+                let [u, v, ur] = p.anchor_obs.map(f64::from);
+                let kept = Measurement { u, v, ur: if z.is_stereo() { ur } else { -1.0 }, ..z };
+                self.uninformative[i] = chi2(cam, &pred, &kept).is_some_and(|c| c <= gate);
                 measured += 1;
             }
         }
@@ -877,7 +893,7 @@ impl MotionScratch {
         // far): the pass cannot tell it from a parked one.
         let (c, d) = pred[k];
         let chi_still = mahalanobis2(s2, d, f64::from(fa.x) - c[0], f64::from(fa.y) - c[1]);
-        self.dl_uninformative[ia] = chi_still <= gate;
+        self.uninformative[ia] = chi_still <= gate;
         self.prev_lo[ia] = p.lo;
         self.prev_of[ia] = nearest.at as u16;
         self.chi2[ia] = chi as f32;
@@ -1064,9 +1080,9 @@ impl MotionScratch {
             let r = self.find(i);
             if self.consistent(i) {
                 self.n_ok[r] = self.n_ok[r].saturating_add(1);
-                // A pass of the depthless test is evidence only where a feature that had not
-                // moved in the image would have failed.
-                self.ev[r] += if self.dl_uninformative[i] { 0.0 } else { LLR_CONSISTENT };
+                // A frame-to-frame pass is evidence only where a feature that had kept its
+                // place relative to the camera would have failed.
+                self.ev[r] += if self.uninformative[i] { 0.0 } else { LLR_CONSISTENT };
             } else {
                 self.n_bad[r] = self.n_bad[r].saturating_add(1);
                 self.ev[r] += LLR_INCONSISTENT;
@@ -1382,7 +1398,7 @@ mod tests {
                 s.gate[i] = 5.99;
                 s.chi2[i] = if i == 1 { 60.0 } else { 1.0 };
             }
-            s.dl_uninformative[2..4].fill(!informative);
+            s.uninformative[2..4].fill(!informative);
             let rep = s.decide(&feats, &cam, &Se3::IDENTITY, &p, |_, e| e);
             assert_eq!(rep.segments, 1);
             assert!((1..4).all(|i| s.measured(i)));
@@ -1405,7 +1421,7 @@ mod tests {
             let feats = [feat(100.0, 100.0, 10.0, 8), feat(105.0, 108.0, 0.0, 8)];
             s.reset(feats.len());
             (s.cand[1], s.prev_lo[1], s.gate[1], s.chi2[1]) = (7, 0.0, 5.99, 1.0);
-            s.dl_uninformative[1] = uninformative;
+            s.uninformative[1] = uninformative;
             let mut sent = std::vec::Vec::new();
             s.decide(&feats, &cam, &Se3::IDENTITY, &p, |id, e| {
                 sent.push((id, e));
@@ -1440,7 +1456,7 @@ mod tests {
             (d.ur, d.depth_m) = (-1.0, -1.0);
             feats.push(d);
             landmarkless_frame(&mut s, &feats, t);
-            passes.push((s.consistent(3), !s.dl_uninformative[3]));
+            passes.push((s.consistent(3), !s.uninformative[3]));
         }
         assert_eq!(passes[1..], [(true, false), (true, false)], "{passes:?}");
     }
@@ -1575,6 +1591,49 @@ mod tests {
         assert_eq!(states[5].0, FeatureMotion::Moving, "{states:?}");
     }
 
+    /// A car 20 m ahead driving at our speed, seen in stereo: its chain test's first step
+    /// passes (1 m along the line of sight is about a disparity pixel there), but a car that
+    /// kept its place relative to the camera would pass too, so the pass is no evidence and
+    /// the chain's failure on the next frame calls it moving at once (counted as evidence of
+    /// standing still, the pass had cancelled that failure). A parked car 3.5 m to the side at
+    /// the same depth moves in the image as the camera drives; its passes park it.
+    #[test]
+    fn a_car_ahead_at_our_speed_passes_the_chain_test_uninformatively() {
+        let cam = crate::testing::kitti_cam();
+        let mut s = std::boxed::Box::new(MotionScratch::new());
+        let ahead: std::vec::Vec<Vector3<f64>> = (0..6)
+            .map(|k| Vector3::new(-0.5 + 0.2 * f64::from(k), 0.3 + 0.1 * f64::from(k % 3), 20.0))
+            .collect();
+        let side: std::vec::Vec<Vector3<f64>> = (0..6)
+            .map(|k| Vector3::new(3.5 + 0.3 * f64::from(k), 0.5 + 0.1 * f64::from(k % 2), 20.0))
+            .collect();
+        let mut got = std::vec::Vec::new();
+        for t in 0..4 {
+            let with_us = Vector3::new(0.0, 0.0, t as f64);
+            let mut feats: std::vec::Vec<Feature> = ahead
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| seen(&cam, &driving(t), q + with_us, 8, k as u8))
+                .collect();
+            feats.extend(
+                side.iter().enumerate().map(|(k, &q)| seen(&cam, &driving(t), q, 8, 100 + k as u8)),
+            );
+            landmarkless_frame(&mut s, &feats, t);
+            got.push((
+                s.consistent(0),
+                s.uninformative[0],
+                s.state[0],
+                s.uninformative[6],
+                s.state[6],
+            ));
+        }
+        use FeatureMotion::*;
+        assert_eq!((got[1].0, got[1].1, got[1].2), (true, true, Unproven), "{got:?}");
+        assert_eq!((got[2].2, got[3].2), (Moving, Moving), "{got:?}");
+        assert!(got[1..].iter().all(|g| !g.3), "the parked car's passes are evidence: {got:?}");
+        assert_eq!((got[2].4, got[3].4), (Parked, Parked), "{got:?}");
+    }
+
     /// A parked car's feature without stereo depth, closer in the image to a car driving
     /// alongside than to the parked car's own stereo features, joins the parked car: its
     /// motion since the previous frame is what the ego-motion gives at the parked car's
@@ -1628,7 +1687,7 @@ mod tests {
         assert!(s.consistent(lone_idx), "measured, and consistent, at the parked car's depth");
         // 3.9 m to the side at 12 m, the parked car's point moves 21 px per frame: a pass there
         // could have seen motion, and is evidence.
-        assert!(!s.dl_uninformative[lone_idx]);
+        assert!(!s.uninformative[lone_idx]);
     }
 
     /// Objects without a single stereo feature (no depth to test them at): a car crossing
