@@ -350,12 +350,13 @@ pub(crate) struct MotionScratch {
     /// nearest attached feature.
     join_d2: [f32; FRAME_CAPACITY],
     join_to: [u16; FRAME_CAPACITY],
-    /// Per feature: whether its frame-to-frame measurement could not tell its object from one
-    /// moving with the camera, so that a pass is no evidence: the depthless test's match with
-    /// no image motion at all, or the chain test's with the chain's first observation, would
-    /// have passed too. Set by the test itself, whatever else the feature was matched to (an
-    /// unmeasured landmark candidate).
-    uninformative: [bool; FRAME_CAPACITY],
+    /// Per feature: whether its measurement could not tell its object from one moving with
+    /// the camera, so that a pass is no evidence: the depthless test's match with no image
+    /// motion at all, the chain test's with the chain's first observation, or a landmark
+    /// match's with the landmark's latest keyframe observation (set by the tracker) would
+    /// have passed too. Set by the test that measured the feature, whatever else it was
+    /// matched to (an unmeasured landmark candidate).
+    pub(crate) uninformative: [bool; FRAME_CAPACITY],
     /// Frame to frame: the moving log-odds of the previous-frame feature this feature matched
     /// (NaN if none; only for features without a landmark match).
     prev_lo: [f32; FRAME_CAPACITY],
@@ -1080,8 +1081,8 @@ impl MotionScratch {
             let r = self.find(i);
             if self.consistent(i) {
                 self.n_ok[r] = self.n_ok[r].saturating_add(1);
-                // A frame-to-frame pass is evidence only where a feature that had kept its
-                // place relative to the camera would have failed.
+                // A pass is evidence only where a feature that had kept its place relative
+                // to the camera would have failed.
                 self.ev[r] += if self.uninformative[i] { 0.0 } else { LLR_CONSISTENT };
             } else {
                 self.n_bad[r] = self.n_bad[r].saturating_add(1);

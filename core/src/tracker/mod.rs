@@ -36,7 +36,7 @@ use crate::motion::{
     FeatureMotion, MotionParams, MotionReport, MotionScratch, MotionSegment, MAX_LANDMARK_LOGIT,
     MOVING_LOGIT, STATIC_LOGIT,
 };
-use crate::optim::{chi2, PoseOptParams};
+use crate::optim::{chi2, Measurement, PoseOptParams};
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
 use crate::seg::is_dynamic;
 
@@ -813,11 +813,23 @@ impl Tracker {
                 continue;
             }
             let z = measurement(f, self.problem.far_m);
-            let pc = self.t_cw.transform_point(&window.lm(id).p_w);
+            let l = window.lm(id);
+            let pc = self.t_cw.transform_point(&l.p_w);
             match chi2(&self.cam, &pc, &z) {
                 Some(c) => {
                     self.motion.chi2[i] = c as f32;
                     self.motion.gate[i] = z.chi2_threshold() as f32;
+                    // Would an object that kept its place relative to the camera since the
+                    // landmark's latest keyframe observation have passed too? Then the pass
+                    // is no evidence of standing still.
+                    let last = l.obs[..usize::from(l.n_obs)].last();
+                    let seen = last.and_then(|o| window.kf(o.kf).features.get(usize::from(o.feat)));
+                    self.motion.uninformative[i] = seen.is_some_and(|k| {
+                        let ur =
+                            if z.is_stereo() && k.is_stereo() { f64::from(k.ur) } else { -1.0 };
+                        let kept = Measurement { u: f64::from(k.x), v: f64::from(k.y), ur, ..z };
+                        chi2(&self.cam, &pc, &kept).is_some_and(|c| c <= kept.chi2_threshold())
+                    });
                 }
                 None => self.motion.chi2[i] = -1.0,
             }

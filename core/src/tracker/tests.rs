@@ -328,6 +328,62 @@ fn motion_aware_tracking_keeps_parked_cars_and_drops_a_moving_one() {
     });
 }
 
+/// A car 25 m ahead stands for six frames (its landmarks are made), then drives off at our
+/// speed: its landmark matches pass their χ² gate while it is far, but an object that kept its
+/// place relative to the camera since the landmark's latest keyframe would pass too, so such a
+/// pass is flagged as no evidence. Parked cars to the side move in the image as we drive, and
+/// almost all of their passes are evidence.
+#[test]
+fn landmark_passes_of_a_car_at_our_speed_are_no_evidence() {
+    run_on_big_stack(|| {
+        let mut rng = Rng::new(0x9a4c_ed00_0000_0011);
+        let pts = world(&mut rng);
+        let mut parked = StdVec::new();
+        for k in 0..6 {
+            parked.extend(car(&mut rng, Vector3::new(4.2, 1.6, 10.0 + 6.0 * k as f64), 60));
+        }
+        // 25 m ahead of the first frame, slightly to the left.
+        let with_us = car(&mut rng, Vector3::new(-1.0, 1.6, 25.0), 150);
+        let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
+        tracker.set_motion_aware(true);
+        let (mut ours, mut ours_uninformative) = (0usize, 0usize);
+        let (mut side, mut side_uninformative) = (0usize, 0usize);
+        for k in 0..16 {
+            let gt = truth(k);
+            let mut frame = render(&pts, &gt, &mut rng);
+            let n_static = frame.features.len();
+            for f in render(&parked, &gt, &mut rng).features.iter() {
+                let _ = frame.features.push(Feature { class: 8, ..*f });
+            }
+            let n_parked = frame.features.len();
+            // Parked (landmarks made and measured) for six frames, then driving at our speed.
+            let drove = truth(k.max(6)).compose(&truth(6).inverse());
+            let moved: StdVec<Point> =
+                with_us.iter().map(|(p, d, nat)| (drove.transform_point(p), *d, *nat)).collect();
+            for f in render(&moved, &gt, &mut rng).features.iter() {
+                let _ = frame.features.push(Feature { class: 8, ..*f });
+            }
+            assert!(!tracker.process(&frame).lost, "frame {k}: lost");
+            let m = &tracker.motion;
+            let passed = |i: &usize| m.cand[*i] != NO_LANDMARK && m.consistent(*i);
+            for i in (n_static..n_parked).filter(passed) {
+                side += 1;
+                side_uninformative += usize::from(m.uninformative[i]);
+            }
+            for i in (n_parked..frame.features.len()).filter(passed).filter(|_| k > 6) {
+                ours += 1;
+                ours_uninformative += usize::from(m.uninformative[i]);
+            }
+        }
+        std::println!(
+            "landmark passes: car at our speed {ours_uninformative} of {ours} uninformative, \
+             parked cars {side_uninformative} of {side}"
+        );
+        assert!(ours >= 10 && ours_uninformative * 10 >= ours * 9, "{ours_uninformative} / {ours}");
+        assert!(side >= 50 && side_uninformative * 2 <= side, "{side_uninformative} / {side}");
+    });
+}
+
 #[test]
 fn feature_use_reports_inliers_and_rejected_outliers() {
     run_on_big_stack(|| {
