@@ -608,14 +608,11 @@ impl MotionScratch {
             if let Some(c) = chi2(cam, &pred, &z) {
                 self.prev_lo[i] = p.lo;
                 self.chi2[i] = c as f32;
-                let gate = z.chi2_threshold();
-                self.gate[i] = gate as f32;
+                self.gate[i] = z.chi2_threshold() as f32;
                 // Would an object that kept its place relative to the camera since the chain
                 // began (a car ahead at our speed) have passed too? Then the pass is no
                 // evidence of standing still.
-                let [u, v, ur] = p.anchor_obs.map(f64::from);
-                let kept = Measurement { u, v, ur: if z.is_stereo() { ur } else { -1.0 }, ..z };
-                self.uninformative[i] = chi2(cam, &pred, &kept).is_some_and(|c| c <= gate);
+                self.uninformative[i] = passes_where_seen_before(cam, &pred, &z, p.anchor_obs);
                 measured += 1;
             }
         }
@@ -1153,6 +1150,23 @@ impl MotionScratch {
         }
         rep
     }
+}
+
+/// Whether measurement `z` would also pass its χ² gate against the predicted camera-frame
+/// point `pred` had it been taken where the same point was seen before, `obs` (u, v and the
+/// right image's u, level-0 px; a negative right u: no stereo): what an object that kept its
+/// place relative to the camera since then would measure. The right u is used only when both
+/// have one. A pass that such an object would also make is no evidence of standing still
+/// (the chain test's first observation, a landmark's latest keyframe observation).
+pub(crate) fn passes_where_seen_before(
+    cam: &StereoCamera,
+    pred: &Vector3<f64>,
+    z: &Measurement,
+    obs: [f32; 3],
+) -> bool {
+    let [u, v, ur] = obs.map(f64::from);
+    let kept = Measurement { u, v, ur: if z.is_stereo() && ur >= 0.0 { ur } else { -1.0 }, ..*z };
+    chi2(cam, pred, &kept).is_some_and(|c| c <= kept.chi2_threshold())
 }
 
 /// Squared Mahalanobis distance of the image residual (`rx`, `ry`) under Σ = `s2` I + d dᵀ: the

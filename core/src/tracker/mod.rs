@@ -33,10 +33,10 @@ use crate::map::{
     measurement, renormalize, LocalMap, LocalSet, Map, MappingParams, NewKeyframe, NO_LANDMARK,
 };
 use crate::motion::{
-    FeatureMotion, MotionParams, MotionReport, MotionScratch, MotionSegment, MAX_LANDMARK_LOGIT,
-    MOVING_LOGIT, STATIC_LOGIT,
+    passes_where_seen_before, FeatureMotion, MotionParams, MotionReport, MotionScratch,
+    MotionSegment, MAX_LANDMARK_LOGIT, MOVING_LOGIT, STATIC_LOGIT,
 };
-use crate::optim::{chi2, Measurement, PoseOptParams};
+use crate::optim::{chi2, PoseOptParams};
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
 use crate::seg::is_dynamic;
 
@@ -825,10 +825,8 @@ impl Tracker {
                     let last = l.obs[..usize::from(l.n_obs)].last();
                     let seen = last.and_then(|o| window.kf(o.kf).features.get(usize::from(o.feat)));
                     self.motion.uninformative[i] = seen.is_some_and(|k| {
-                        let ur =
-                            if z.is_stereo() && k.is_stereo() { f64::from(k.ur) } else { -1.0 };
-                        let kept = Measurement { u: f64::from(k.x), v: f64::from(k.y), ur, ..z };
-                        chi2(&self.cam, &pc, &kept).is_some_and(|c| c <= kept.chi2_threshold())
+                        let ur = if k.is_stereo() { k.ur } else { -1.0 };
+                        passes_where_seen_before(&self.cam, &pc, &z, [k.x, k.y, ur])
                     });
                 }
                 None => self.motion.chi2[i] = -1.0,
