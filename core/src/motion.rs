@@ -64,6 +64,14 @@
 //!    riding ahead at the ego's speed, whose features do not move in the image, is then off
 //!    its segment, as is a lorry's top; a car oncoming, or ahead at another speed, still
 //!    moves along it until the chain's segment ends.
+//!    **No evidence from a pass a mover would make too.** A pass counts as evidence of
+//!    standing still only where the test could have seen motion: not where an object that
+//!    kept its place relative to the camera since the reference observation (a car ahead at
+//!    our speed) would have passed too, nor, for a stereo chain or landmark match, where one
+//!    that moved [`MotionParams::slow_human_mps`] (people) or
+//!    [`MotionParams::slow_vehicle_mps`] (vehicles; off by default) along the road since
+//!    then would have (a pedestrian walking away along the pavement 20 m ahead). Such a pass
+//!    adds nothing; by the time a slow mover would fail, a real one fails too.
 //! 4. **A latent "moving" variable per landmark**, accumulated over frames: each matched
 //!    landmark of the segment adds the segment's evidence to its log-odds (clamped to ±4). The
 //!    A feature matched frame to frame carries the log-odds of the feature it matched the
@@ -133,6 +141,15 @@ pub struct MotionParams {
     /// a cyclist riding ahead at the ego's speed, whose features do not move in the image, is
     /// then off its epipolar segment.
     pub camera_height_m: f32,
+    /// Slowest walking speed (m/s) the test must tell from standing still: a pass of a
+    /// stereo chain or landmark match that a pedestrian or cyclist moving this fast along the
+    /// road (the camera's optical axis) since the reference observation would also make is no
+    /// evidence of standing still; 0 turns this off. Needs the frames' times.
+    pub slow_human_mps: f32,
+    /// The same for vehicles (a car creeping in a queue, or pulling away slowly); 0 (off) by
+    /// default: at 1.5 m/s parked cars were withheld longer and withheld precision fell on
+    /// synthetic `high` and `parked` more than recall rose.
+    pub slow_vehicle_mps: f32,
 }
 
 impl Default for MotionParams {
@@ -147,6 +164,8 @@ impl Default for MotionParams {
             track_px: 48.0,
             epipolar: true,
             camera_height_m: 1.65,
+            slow_human_mps: 1.0,
+            slow_vehicle_mps: 0.0,
         }
     }
 }
@@ -161,6 +180,15 @@ impl MotionParams {
         };
         let p = p.clamp(1e-3, 1.0 - 1e-3);
         libm::logf(p / (1.0 - p))
+    }
+
+    /// Slowest speed (m/s) of a moving object of this class the test must detect.
+    pub fn slow_mps(&self, class: u8) -> f32 {
+        match category(class) {
+            Category::Vehicle => self.slow_vehicle_mps,
+            Category::Human => self.slow_human_mps,
+            _ => 0.0,
+        }
     }
 }
 
@@ -250,6 +278,8 @@ struct PrevFeature {
     /// The chain's first observation (u, v, right-image u; level-0 px): what this frame would
     /// measure if the object had kept its place relative to the camera since then.
     anchor_obs: [f32; 3],
+    /// Time (s) of the chain's first observation.
+    anchor_s: f64,
     desc: Descriptor,
     level: u8,
     class: u8,
@@ -382,6 +412,8 @@ pub(crate) struct MotionScratch {
     prev_stereo: usize,
     /// The ratio test of this frame's matches (set by [`Self::match_previous`]).
     nn_ratio: f32,
+    /// This frame's time (s), set by the tracker.
+    pub(crate) now_s: f64,
 }
 
 impl MotionScratch {
@@ -416,6 +448,7 @@ impl MotionScratch {
             prev_t_cw: Se3::IDENTITY,
             prev_stereo: 0,
             nn_ratio: 0.8,
+            now_s: 0.0,
         }
     }
 
@@ -460,18 +493,20 @@ impl MotionScratch {
             // A feature matched to a stereo one continues its chain: the anchor stays where
             // the chain began.
             let link = usize::from(self.prev_of[i]);
-            let (anchor_w, anchor_depth, anchor_level, anchor_obs) = match self.prev.get(link) {
-                Some(p) if link < self.prev_stereo => {
-                    (p.anchor_w, p.anchor_depth, p.anchor_level, p.anchor_obs)
-                }
-                _ => (p_w, f.depth_m, f.level, [f.x, f.y, f.ur]),
-            };
+            let (anchor_w, anchor_depth, anchor_level, anchor_obs, anchor_s) =
+                match self.prev.get(link) {
+                    Some(p) if link < self.prev_stereo => {
+                        (p.anchor_w, p.anchor_depth, p.anchor_level, p.anchor_obs, p.anchor_s)
+                    }
+                    _ => (p_w, f.depth_m, f.level, [f.x, f.y, f.ur], self.now_s),
+                };
             let p = PrevFeature {
                 p_w,
                 anchor_w,
                 anchor_depth,
                 anchor_level,
                 anchor_obs,
+                anchor_s,
                 desc: f.desc,
                 level: f.level,
                 class: f.class,
@@ -491,14 +526,15 @@ impl MotionScratch {
                 continue;
             }
             let link = usize::from(self.prev_of[i]);
-            let (ray_w, anchor_w, anchor_depth, anchor_level) = match self.prev.get(link) {
+            let (ray_w, anchor_w, anchor_depth, anchor_level, anchor_s) = match self.prev.get(link)
+            {
                 Some(p) if link >= self.prev_stereo => {
-                    (p.p_w, p.anchor_w, p.anchor_depth, p.anchor_level)
+                    (p.p_w, p.anchor_w, p.anchor_depth, p.anchor_level, p.anchor_s)
                 }
                 _ => {
                     let (origin, step, far) =
                         sighting_ray(cam, t_wc, f.x, f.y, f.class, params.camera_height_m);
-                    (step, origin, far as f32, f.level)
+                    (step, origin, far as f32, f.level, self.now_s)
                 }
             };
             let p = PrevFeature {
@@ -507,6 +543,7 @@ impl MotionScratch {
                 anchor_depth,
                 anchor_level,
                 anchor_obs: [f.x, f.y, -1.0],
+                anchor_s,
                 desc: f.desc,
                 level: f.level,
                 class: f.class,
@@ -612,7 +649,10 @@ impl MotionScratch {
                 // Would an object that kept its place relative to the camera since the chain
                 // began (a car ahead at our speed) have passed too? Then the pass is no
                 // evidence of standing still.
-                self.uninformative[i] = passes_where_seen_before(cam, &pred, &z, p.anchor_obs);
+                // Or one moving slowly along the road (a pedestrian walking on the pavement)?
+                let d = f64::from(params.slow_mps(f.class)) * (self.now_s - p.anchor_s).max(0.0);
+                self.uninformative[i] = passes_where_seen_before(cam, &pred, &z, p.anchor_obs)
+                    || passes_if_moved_along_road(cam, &pred, &z, d);
                 measured += 1;
             }
         }
@@ -1169,6 +1209,32 @@ pub(crate) fn passes_where_seen_before(
     chi2(cam, pred, &kept).is_some_and(|c| c <= kept.chi2_threshold())
 }
 
+/// Whether measurement `z` would also pass its χ² gate against the predicted camera-frame
+/// point `pred` had the point moved `d` metres forward or back along the camera's optical
+/// axis (the road) since it was first seen: what a slow mover (a pedestrian walking on the
+/// pavement, a car creeping in a queue) would measure. Such a pass is no evidence of
+/// standing still.
+pub(crate) fn passes_if_moved_along_road(
+    cam: &StereoCamera,
+    pred: &Vector3<f64>,
+    z: &Measurement,
+    d: f64,
+) -> bool {
+    // (NaN: no time.)
+    if d.is_nan() || d <= 0.0 {
+        return false;
+    }
+    [-d, d].iter().any(|&s| {
+        let h = pred + Vector3::new(0.0, 0.0, s);
+        let Some(p) = (h.z > 0.0).then(|| cam.project_stereo(&h)).flatten() else {
+            return false;
+        };
+        let moved =
+            Measurement { u: p.x, v: p.y, ur: if z.is_stereo() { p.z } else { -1.0 }, ..*z };
+        chi2(cam, pred, &moved).is_some_and(|c| c <= moved.chi2_threshold())
+    })
+}
+
 /// Squared Mahalanobis distance of the image residual (`rx`, `ry`) under Σ = `s2` I + d dᵀ: the
 /// feature's isotropic noise and its object's depth extent along the epipolar line `d`.
 fn mahalanobis2(s2: f64, d: [f64; 2], rx: f64, ry: f64) -> f64 {
@@ -1506,10 +1572,21 @@ mod tests {
     /// settings): match to the previous frame, decide, remember; returns how many features
     /// were measured frame to frame.
     fn landmarkless_frame(s: &mut MotionScratch, feats: &[Feature], t: usize) -> u32 {
+        landmarkless_frame_with(s, feats, t, &MotionParams::default())
+    }
+
+    /// [`landmarkless_frame`] with settings `p`; frames are 0.1 s apart (10 Hz, as KITTI).
+    fn landmarkless_frame_with(
+        s: &mut MotionScratch,
+        feats: &[Feature],
+        t: usize,
+        p: &MotionParams,
+    ) -> u32 {
         let cam = crate::testing::kitti_cam();
-        let p = MotionParams::default();
+        let p = *p;
         let far = 40.0 * cam.baseline_m as f32;
         s.reset(feats.len());
+        s.now_s = 0.1 * t as f64;
         let measured = s.match_previous(feats, &cam, &driving(t), far, &p, TRACK_MAX_HAMMING, 0.8);
         s.decide(feats, &cam, &driving(t), &p, |_, _| unreachable!("no landmarks"));
         s.remember(feats, &cam, &driving(t).inverse(), far, &p);
@@ -1647,6 +1724,54 @@ mod tests {
         assert_eq!((got[2].2, got[3].2), (Moving, Moving), "{got:?}");
         assert!(got[1..].iter().all(|g| !g.3), "the parked car's passes are evidence: {got:?}");
         assert_eq!((got[2].4, got[3].4), (Parked, Parked), "{got:?}");
+    }
+
+    /// Two people on the pavements while the camera drives at 10 m/s: one 18 m ahead on the
+    /// right walks away along the pavement at 1 m/s, the other, 13 m ahead on the left,
+    /// stands. Over a few frames the walker's steps are inside the stereo noise, and under
+    /// the old rule its first three passes parked it (frame 3, taken back only on frame 7).
+    /// A pass that a walker at [`MotionParams::slow_human_mps`] would also make is no
+    /// evidence, and by the time a walker would fail, this one fails too. The standing one
+    /// is parked once its passes could have told (frame 4; frame 3 under the old rule).
+    #[test]
+    fn a_pedestrian_walking_along_the_pavement_is_not_parked_by_its_first_passes() {
+        let cam = crate::testing::kitti_cam();
+        let person = |x: f64, z: f64| -> std::vec::Vec<Vector3<f64>> {
+            (0..6)
+                .map(|k| Vector3::new(x + 0.1 * f64::from(k % 3), 1.3 - 0.25 * f64::from(k), z))
+                .collect()
+        };
+        let (walker, stander) = (person(3.5, 18.0), person(-4.0, 13.0));
+        let run = |p: &MotionParams| {
+            let mut s = std::boxed::Box::new(MotionScratch::new());
+            let mut got = std::vec::Vec::new();
+            for t in 0..8 {
+                let step = Vector3::new(0.0, 0.0, 0.1 * t as f64);
+                let mut feats: std::vec::Vec<Feature> = walker
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &q)| seen(&cam, &driving(t), q + step, 9, k as u8))
+                    .collect();
+                feats.extend(
+                    stander
+                        .iter()
+                        .enumerate()
+                        .map(|(k, &q)| seen(&cam, &driving(t), q, 9, 100 + k as u8)),
+                );
+                landmarkless_frame_with(&mut s, &feats, t, p);
+                got.push((s.state[0], s.state[6]));
+            }
+            got
+        };
+        use FeatureMotion::*;
+        let p = MotionParams::default();
+        let got = run(&p);
+        assert!(got.iter().all(|g| g.0 != Parked), "walker parked: {got:?}");
+        assert_eq!(got[7].0, Moving, "{got:?}");
+        assert!(got[4..].iter().all(|g| g.1 == Parked), "stander: {got:?}");
+        // Without the rule the walker's first passes park it.
+        let old = run(&MotionParams { slow_human_mps: 0.0, ..p });
+        assert!(old.iter().any(|g| g.0 == Parked), "{old:?}");
     }
 
     /// A parked car's feature without stereo depth, closer in the image to a car driving

@@ -215,6 +215,8 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("tracker.motion.epipolar", "Match a depthless feature nothing else measured to the previous frame by appearance; off its epipolar line is evidence of motion."),
     ("tracker.motion.camera_height_m", "Height of the left camera above the road, m (level with it; 0: unknown). In the epipolar test a still point of a dynamic class is neither under the road nor higher than 4.5 m (vehicles) or 2.5 m (people)."),
     ("semantics", "Semantic weighting of features."),
+    ("tracker.motion.slow_human_mps", "Slowest walking speed the motion test must tell from standing still, m/s (0: off): a pass that a pedestrian or cyclist moving this fast along the road since it was first seen would also make is no evidence that it stands still."),
+    ("tracker.motion.slow_vehicle_mps", "The same for cars, vans and trucks (a car creeping in a queue), m/s (0: off)."),
     ("semantics.mode", "\"off\" (geometric), \"cull\" (no features on dynamic classes), \"full\" (the paper: cull dynamic, x3 construction and object classes) or \"motion\" (as full, but dynamic-class features removed only where the object moves)."),
     ("semantics.model", "The int8 segmentation network (.slm); relative to this file's folder. Without one, labels come from the dataset's semantic/ folder."),
 ];
@@ -360,11 +362,14 @@ impl Settings {
                 format!("{} must be finite and ≥ 0", t.motion.track_px),
             );
         }
-        if !(t.motion.camera_height_m.is_finite() && t.motion.camera_height_m >= 0.0) {
-            return bad(
-                "tracker.motion.camera_height_m",
-                format!("{} must be finite and ≥ 0", t.motion.camera_height_m),
-            );
+        for (k, v) in [
+            ("tracker.motion.camera_height_m", t.motion.camera_height_m),
+            ("tracker.motion.slow_human_mps", t.motion.slow_human_mps),
+            ("tracker.motion.slow_vehicle_mps", t.motion.slow_vehicle_mps),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(k, format!("{v} must be finite and ≥ 0"));
+            }
         }
         if t.keyframe_max_interval == 0 {
             return bad("tracker.keyframe_max_interval", "must be ≥ 1".into());

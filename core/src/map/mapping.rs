@@ -180,6 +180,7 @@ impl LocalMap {
             return out;
         };
         out.stored = true;
+        self.map.kf_mut(slot).timestamp_s = frame.timestamp_s;
         match kf.blocked {
             Some(b) => self.blocked[..feats.len()].copy_from_slice(&b[..feats.len()]),
             None => self.blocked[..feats.len()].fill(false),

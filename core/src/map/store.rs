@@ -139,6 +139,8 @@ pub struct KeyFrame {
     pub id: u32,
     /// Index of the frame it was made from.
     pub frame_index: u32,
+    /// Time (s) of that frame.
+    pub timestamp_s: f64,
     /// World-to-camera pose.
     pub t_cw: Se3,
     /// The features.
@@ -162,6 +164,7 @@ impl KeyFrame {
         Self {
             id: 0,
             frame_index: 0,
+            timestamp_s: 0.0,
             t_cw: Se3::IDENTITY,
             features: Vec::new(),
             landmark: [NO_LANDMARK; FRAME_CAPACITY],

@@ -33,8 +33,8 @@ use crate::map::{
     measurement, renormalize, LocalMap, LocalSet, Map, MappingParams, NewKeyframe, NO_LANDMARK,
 };
 use crate::motion::{
-    passes_where_seen_before, FeatureMotion, MotionParams, MotionReport, MotionScratch,
-    MotionSegment, MAX_LANDMARK_LOGIT, MOVING_LOGIT, STATIC_LOGIT,
+    passes_if_moved_along_road, passes_where_seen_before, FeatureMotion, MotionParams,
+    MotionReport, MotionScratch, MotionSegment, MAX_LANDMARK_LOGIT, MOVING_LOGIT, STATIC_LOGIT,
 };
 use crate::optim::{chi2, PoseOptParams};
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
@@ -515,6 +515,7 @@ impl Tracker {
             motion: MotionReport::default(),
         };
         self.motion.reset(frame.features.len());
+        self.motion.now_s = frame.timestamp_s;
         self.solved = false;
         let last = self.t_cw;
         // Every pose that feeds back into the next frame is re-orthonormalised: the
@@ -824,10 +825,16 @@ impl Tracker {
                     // is no evidence of standing still.
                     let last = l.obs[..usize::from(l.n_obs)].last();
                     let seen = last.and_then(|o| window.kf(o.kf).features.get(usize::from(o.feat)));
-                    self.motion.uninformative[i] = seen.is_some_and(|k| {
+                    let kept = seen.is_some_and(|k| {
                         let ur = if k.is_stereo() { k.ur } else { -1.0 };
                         passes_where_seen_before(&self.cam, &pc, &z, [k.x, k.y, ur])
                     });
+                    // Or one moving slowly along the road since then?
+                    let since =
+                        last.map_or(0.0, |o| self.motion.now_s - window.kf(o.kf).timestamp_s);
+                    let d = f64::from(self.params.motion.slow_mps(f.class)) * since.max(0.0);
+                    self.motion.uninformative[i] =
+                        kept || passes_if_moved_along_road(&self.cam, &pc, &z, d);
                 }
                 None => self.motion.chi2[i] = -1.0,
             }
