@@ -647,12 +647,16 @@ impl MotionScratch {
                 self.chi2[i] = c as f32;
                 self.gate[i] = z.chi2_threshold() as f32;
                 // Would an object that kept its place relative to the camera since the chain
-                // began (a car ahead at our speed) have passed too? Then the pass is no
-                // evidence of standing still.
-                // Or one moving slowly along the road (a pedestrian walking on the pavement)?
-                let d = f64::from(params.slow_mps(f.class)) * (self.now_s - p.anchor_s).max(0.0);
-                self.uninformative[i] = passes_where_seen_before(cam, &pred, &z, p.anchor_obs)
-                    || passes_if_moved_along_road(cam, &pred, &z, d);
+                // began (a car ahead at our speed), or one walking slowly along the road, have
+                // passed too? Then the pass is no evidence of standing still.
+                self.uninformative[i] = a_mover_passes_too(
+                    cam,
+                    &pred,
+                    &z,
+                    Some(p.anchor_obs),
+                    self.now_s - p.anchor_s,
+                    params.slow_mps(f.class),
+                );
                 measured += 1;
             }
         }
@@ -1198,7 +1202,7 @@ impl MotionScratch {
 /// place relative to the camera since then would measure. The right u is used only when both
 /// have one. A pass that such an object would also make is no evidence of standing still
 /// (the chain test's first observation, a landmark's latest keyframe observation).
-pub(crate) fn passes_where_seen_before(
+fn passes_where_seen_before(
     cam: &StereoCamera,
     pred: &Vector3<f64>,
     z: &Measurement,
@@ -1209,12 +1213,31 @@ pub(crate) fn passes_where_seen_before(
     chi2(cam, pred, &kept).is_some_and(|c| c <= kept.chi2_threshold())
 }
 
+/// Whether a pass of measurement `z` against the predicted camera-frame point `pred` is no
+/// evidence of standing still, because a mover would have passed too: an object that kept
+/// its place relative to the camera since it was seen at `seen` ([`passes_where_seen_before`];
+/// a car ahead at our speed), or one that moved `slow_mps` along the road in the `since_s`
+/// seconds since then ([`passes_if_moved_along_road`]; a pedestrian walking on the pavement).
+/// The chain test asks it of the chain's first observation, the tracker of a landmark's
+/// latest keyframe observation.
+pub(crate) fn a_mover_passes_too(
+    cam: &StereoCamera,
+    pred: &Vector3<f64>,
+    z: &Measurement,
+    seen: Option<[f32; 3]>,
+    since_s: f64,
+    slow_mps: f32,
+) -> bool {
+    seen.is_some_and(|obs| passes_where_seen_before(cam, pred, z, obs))
+        || passes_if_moved_along_road(cam, pred, z, f64::from(slow_mps) * since_s.max(0.0))
+}
+
 /// Whether measurement `z` would also pass its χ² gate against the predicted camera-frame
 /// point `pred` had the point moved `d` metres forward or back along the camera's optical
 /// axis (the road) since it was first seen: what a slow mover (a pedestrian walking on the
 /// pavement, a car creeping in a queue) would measure. Such a pass is no evidence of
 /// standing still.
-pub(crate) fn passes_if_moved_along_road(
+fn passes_if_moved_along_road(
     cam: &StereoCamera,
     pred: &Vector3<f64>,
     z: &Measurement,

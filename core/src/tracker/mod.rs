@@ -33,8 +33,8 @@ use crate::map::{
     measurement, renormalize, LocalMap, LocalSet, Map, MappingParams, NewKeyframe, NO_LANDMARK,
 };
 use crate::motion::{
-    passes_if_moved_along_road, passes_where_seen_before, FeatureMotion, MotionParams,
-    MotionReport, MotionScratch, MotionSegment, MAX_LANDMARK_LOGIT, MOVING_LOGIT, STATIC_LOGIT,
+    a_mover_passes_too, FeatureMotion, MotionParams, MotionReport, MotionScratch, MotionSegment,
+    MAX_LANDMARK_LOGIT, MOVING_LOGIT, STATIC_LOGIT,
 };
 use crate::optim::{chi2, PoseOptParams};
 use crate::ransac::{count_inliers, ransac_pose, Correspondence};
@@ -821,20 +821,22 @@ impl Tracker {
                     self.motion.chi2[i] = c as f32;
                     self.motion.gate[i] = z.chi2_threshold() as f32;
                     // Would an object that kept its place relative to the camera since the
-                    // landmark's latest keyframe observation have passed too? Then the pass
-                    // is no evidence of standing still.
+                    // landmark's latest keyframe observation, or one walking slowly along the
+                    // road since then, have passed too? Then the pass is no evidence of
+                    // standing still.
                     let last = l.obs[..usize::from(l.n_obs)].last();
                     let seen = last.and_then(|o| window.kf(o.kf).features.get(usize::from(o.feat)));
-                    let kept = seen.is_some_and(|k| {
-                        let ur = if k.is_stereo() { k.ur } else { -1.0 };
-                        passes_where_seen_before(&self.cam, &pc, &z, [k.x, k.y, ur])
-                    });
-                    // Or one moving slowly along the road since then?
+                    let obs = seen.map(|k| [k.x, k.y, if k.is_stereo() { k.ur } else { -1.0 }]);
                     let since =
                         last.map_or(0.0, |o| self.motion.now_s - window.kf(o.kf).timestamp_s);
-                    let d = f64::from(self.params.motion.slow_mps(f.class)) * since.max(0.0);
-                    self.motion.uninformative[i] =
-                        kept || passes_if_moved_along_road(&self.cam, &pc, &z, d);
+                    self.motion.uninformative[i] = a_mover_passes_too(
+                        &self.cam,
+                        &pc,
+                        &z,
+                        obs,
+                        since,
+                        self.params.motion.slow_mps(f.class),
+                    );
                 }
                 None => self.motion.chi2[i] = -1.0,
             }
