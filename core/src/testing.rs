@@ -67,6 +67,15 @@ impl Rng {
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.unit()
     }
+
+    /// A random 256-bit ORB descriptor (one draw per byte, low byte kept).
+    pub fn descriptor(&mut self) -> [u8; 32] {
+        let mut d = [0u8; 32];
+        for b in d.iter_mut() {
+            *b = self.next_u64() as u8;
+        }
+        d
+    }
 }
 
 /// Seeded 32-bit xorshift (13, 17, 5), the generator of the image fixtures.

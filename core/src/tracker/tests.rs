@@ -25,10 +25,7 @@ fn world(rng: &mut Rng) -> StdVec<Point> {
                 1 => Vector3::new(6.0 + rng.unit(), -rng.unit() * 6.0 + 1.6, z),
                 _ => Vector3::new(rng.unit() * 12.0 - 6.0, 1.6, z),
             };
-            let mut d = [0u8; 32];
-            for b in d.iter_mut() {
-                *b = rng.next_u64() as u8;
-            }
+            let d = rng.descriptor();
             (p, d, 10.0 + rng.unit() * 50.0)
         })
         .collect()
@@ -261,10 +258,7 @@ fn car(rng: &mut Rng, c: Vector3<f64>, n: usize) -> StdVec<Point> {
             } else {
                 Vector3::new(c.x + u * 1.8, c.y - v * 1.4, c.z - 2.15)
             };
-            let mut d = [0u8; 32];
-            for b in d.iter_mut() {
-                *b = rng.next_u64() as u8;
-            }
+            let d = rng.descriptor();
             (p, d, 10.0 + rng.unit() * 40.0)
         })
         .collect()
@@ -390,10 +384,7 @@ fn people(rng: &mut Rng, c: Vector3<f64>, n: usize) -> StdVec<Point> {
     (0..n)
         .map(|_| {
             let (u, v, w) = (rng.unit() - 0.5, rng.unit(), rng.unit() - 0.5);
-            let mut d = [0u8; 32];
-            for b in d.iter_mut() {
-                *b = rng.next_u64() as u8;
-            }
+            let d = rng.descriptor();
             (
                 Vector3::new(c.x + u * 1.5, c.y - 0.1 - v * 1.6, c.z + w * 0.4),
                 d,
@@ -524,10 +515,7 @@ fn highway(rng: &mut Rng) -> StdVec<Point> {
             6.0
         };
         let p = Vector3::new(x + rng.unit() * 0.5, rng.unit() * 4.0 - 2.4, z);
-        let mut d = [0u8; 32];
-        for b in d.iter_mut() {
-            *b = rng.next_u64() as u8;
-        }
+        let d = rng.descriptor();
         pts.push((p, d, p.norm() * 1.05));
     }
     pts
