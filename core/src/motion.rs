@@ -67,11 +67,13 @@
 //!    **No evidence from a pass a mover would make too.** A pass counts as evidence of
 //!    standing still only where the test could have seen motion: not where an object that
 //!    kept its place relative to the camera since the reference observation (a car ahead at
-//!    our speed) would have passed too, nor, for a stereo chain or landmark match, where one
-//!    that moved [`MotionParams::slow_human_mps`] (people) or
-//!    [`MotionParams::slow_vehicle_mps`] (vehicles; off by default) along the road since
-//!    then would have (a pedestrian walking away along the pavement 20 m ahead). Such a pass
-//!    adds nothing; by the time a slow mover would fail, a real one fails too.
+//!    our speed) would have passed too, nor where one that moved
+//!    [`MotionParams::slow_human_mps`] (people) or [`MotionParams::slow_vehicle_mps`]
+//!    (vehicles; off by default) along the road since then would have (a pedestrian walking
+//!    away along the pavement 20 m ahead). Such a pass adds nothing; by the time a slow mover
+//!    would fail a chain or landmark match, a real one fails too. A depthless pass, one frame
+//!    with the object's depth extent along the epipolar line, is one a walker makes too when
+//!    driving forward: a person's depthless passes count for nothing.
 //! 4. **A latent "moving" variable per landmark**, accumulated over frames: each matched
 //!    landmark of the segment adds the segment's evidence to its log-odds (clamped to ±4). The
 //!    A feature matched frame to frame carries the log-odds of the feature it matched the
@@ -408,6 +410,8 @@ pub(crate) struct MotionScratch {
     prev_uv: [[f32; 2]; PREV_CAPACITY],
     /// The previous frame's final pose (camera from world), for its depthless features.
     prev_t_cw: Se3,
+    /// The previous frame's time (s; NaN before the first), for the depthless test's movers.
+    prev_s: f64,
     /// How many of [`Self::prev`] have stereo depth (they come first).
     prev_stereo: usize,
     /// The ratio test of this frame's matches (set by [`Self::match_previous`]).
@@ -446,6 +450,7 @@ impl MotionScratch {
             prev_dist: [0; PREV_CAPACITY],
             prev_uv: [[0.0; 2]; PREV_CAPACITY],
             prev_t_cw: Se3::IDENTITY,
+            prev_s: f64::NAN,
             prev_stereo: 0,
             nn_ratio: 0.8,
             now_s: 0.0,
@@ -557,6 +562,7 @@ impl MotionScratch {
         core::mem::swap(&mut self.prev, &mut self.next);
         self.prev_stereo = stereo;
         self.prev_t_cw = t_wc.inverse();
+        self.prev_s = self.now_s;
     }
 
     /// The frame-to-frame test: each dynamic-class feature without a landmark match is
@@ -932,10 +938,19 @@ impl MotionScratch {
         }
         // Would a match that had not moved in the image have passed too? Then so would an
         // object moving with the camera (a car ahead near the focus of expansion, anything
-        // far): the pass cannot tell it from a parked one.
+        // far): the pass cannot tell it from a parked one. Nor can it if a slow mover (a
+        // pedestrian walking along the pavement) would have passed: the object's depth
+        // extent along the epipolar line hides a step along the road.
         let (c, d) = pred[k];
         let chi_still = mahalanobis2(s2, d, f64::from(fa.x) - c[0], f64::from(fa.y) - c[1]);
-        self.uninformative[ia] = chi_still <= gate;
+        let z = f64::from(feats[hyp[k].1].depth_m);
+        let step = f64::from(params.slow_mps(fa.class)) * (self.now_s - self.prev_s);
+        let mover = |q: [f64; 2]| mahalanobis2(s2, d, q[0] - c[0], q[1] - c[1]) <= gate;
+        self.uninformative[ia] = chi_still <= gate
+            || moved_along_road(cam, t_prev_cur, cam.backproject(u, v, z), step)
+                .into_iter()
+                .flatten()
+                .any(mover);
         self.prev_lo[ia] = p.lo;
         self.prev_of[ia] = nearest.at as u16;
         self.chi2[ia] = chi as f32;
@@ -1255,6 +1270,24 @@ fn passes_if_moved_along_road(
         let moved =
             Measurement { u: p.x, v: p.y, ur: if z.is_stereo() { p.z } else { -1.0 }, ..*z };
         chi2(cam, pred, &moved).is_some_and(|c| c <= moved.chi2_threshold())
+    })
+}
+
+/// Where a point now at `x` (camera frame) was seen by the previous camera (`t_prev_cur`:
+/// previous from current) had it moved `step` metres back or forward along the camera's
+/// optical axis (the road) since then: none when `step` is not positive (NaN: no time) or
+/// the point was behind that camera.
+fn moved_along_road(
+    cam: &StereoCamera,
+    t_prev_cur: &Se3,
+    x: Vector3<f64>,
+    step: f64,
+) -> [Option<[f64; 2]>; 2] {
+    [-step, step].map(|s| {
+        let p = (step > 0.0)
+            .then(|| cam.project(&t_prev_cur.transform_point(&(x - Vector3::new(0.0, 0.0, s)))))
+            .flatten()?;
+        Some([p.x, p.y])
     })
 }
 
@@ -1851,6 +1884,47 @@ mod tests {
         // 3.9 m to the side at 12 m, the parked car's point moves 21 px per frame: a pass there
         // could have seen motion, and is evidence.
         assert!(!s.uninformative[lone_idx]);
+    }
+
+    /// Driving forward, a step along the road moves a point's image along its epipolar line,
+    /// where the depthless test allows for the object's depth extent: its pass cannot tell a
+    /// person walking along the pavement from one standing, so it is no evidence for either.
+    /// A car's pass (no slow speed for vehicles by default) still is.
+    #[test]
+    fn a_depthless_pass_cannot_tell_a_walker_from_a_person_standing() {
+        let cam = crate::testing::kitti_cam();
+        let lone_pass = |class: u8, p: &MotionParams| {
+            let mut s = std::boxed::Box::new(MotionScratch::new());
+            // An object 12 m ahead on the right (stereo features), one of its points without
+            // stereo depth.
+            let object: std::vec::Vec<Vector3<f64>> = (0..4)
+                .map(|k| {
+                    Vector3::new(3.0 + 0.15 * f64::from(k), 0.8 + 0.05 * f64::from(k % 2), 12.0)
+                })
+                .collect();
+            let lone = Vector3::new(3.5, 0.6, 12.2);
+            let mut got = std::vec::Vec::new();
+            for t in 0..3 {
+                let mut feats: std::vec::Vec<Feature> = object
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &q)| seen(&cam, &driving(t), q, class, k as u8))
+                    .collect();
+                let mut d = seen(&cam, &driving(t), lone, class, 50);
+                (d.ur, d.depth_m) = (-1.0, -1.0);
+                feats.push(d);
+                landmarkless_frame_with(&mut s, &feats, t, p);
+                got.push((s.measured(4), s.consistent(4), s.uninformative[4]));
+            }
+            got
+        };
+        let p = MotionParams::default();
+        let person = lone_pass(9, &p);
+        assert_eq!(person[2], (true, true, true), "{person:?}");
+        let without = lone_pass(9, &MotionParams { slow_human_mps: 0.0, ..p });
+        assert_eq!(without[2], (true, true, false), "{without:?}");
+        let car = lone_pass(8, &p);
+        assert_eq!(car[2], (true, true, false), "{car:?}");
     }
 
     /// Objects without a single stereo feature (no depth to test them at): a car crossing
