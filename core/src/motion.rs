@@ -103,7 +103,7 @@
 //! [`crate::map::Landmark::moving_lo`]. No allocation, deterministic.
 
 use heapless::Vec;
-use nalgebra::Vector3;
+use nalgebra::{Vector2, Vector3};
 
 use crate::frame::{hamming, level_inv_sigma2, level_scale, Descriptor, Feature, FRAME_CAPACITY};
 use crate::geom::{Se3, StereoCamera};
@@ -945,11 +945,12 @@ impl MotionScratch {
         let chi_still = mahalanobis2(s2, d, f64::from(fa.x) - c[0], f64::from(fa.y) - c[1]);
         let z = f64::from(feats[hyp[k].1].depth_m);
         let step = f64::from(params.slow_mps(fa.class)) * (self.now_s - self.prev_s);
-        let mover = |q: [f64; 2]| mahalanobis2(s2, d, q[0] - c[0], q[1] - c[1]) <= gate;
+        // Where the previous camera saw a point that is now at `x` and stepped along the road.
+        let x = cam.backproject(u, v, z);
+        let mover = |q: Vector2<f64>| mahalanobis2(s2, d, q.x - c[0], q.y - c[1]) <= gate;
         self.uninformative[ia] = chi_still <= gate
-            || moved_along_road(cam, t_prev_cur, cam.backproject(u, v, z), step)
-                .into_iter()
-                .flatten()
+            || road_steps(step)
+                .filter_map(|s| cam.project(&t_prev_cur.transform_point(&(x - s))))
                 .any(mover);
         self.prev_lo[ia] = p.lo;
         self.prev_of[ia] = nearest.at as u16;
@@ -1258,12 +1259,8 @@ fn passes_if_moved_along_road(
     z: &Measurement,
     d: f64,
 ) -> bool {
-    // (NaN: no time.)
-    if d.is_nan() || d <= 0.0 {
-        return false;
-    }
-    [-d, d].iter().any(|&s| {
-        let h = pred + Vector3::new(0.0, 0.0, s);
+    road_steps(d).any(|s| {
+        let h = pred + s;
         let Some(p) = (h.z > 0.0).then(|| cam.project_stereo(&h)).flatten() else {
             return false;
         };
@@ -1273,22 +1270,10 @@ fn passes_if_moved_along_road(
     })
 }
 
-/// Where a point now at `x` (camera frame) was seen by the previous camera (`t_prev_cur`:
-/// previous from current) had it moved `step` metres back or forward along the camera's
-/// optical axis (the road) since then: none when `step` is not positive (NaN: no time) or
-/// the point was behind that camera.
-fn moved_along_road(
-    cam: &StereoCamera,
-    t_prev_cur: &Se3,
-    x: Vector3<f64>,
-    step: f64,
-) -> [Option<[f64; 2]>; 2] {
-    [-step, step].map(|s| {
-        let p = (step > 0.0)
-            .then(|| cam.project(&t_prev_cur.transform_point(&(x - Vector3::new(0.0, 0.0, s)))))
-            .flatten()?;
-        Some([p.x, p.y])
-    })
+/// The steps a slow mover may have taken: `d` metres back or forward along the camera's
+/// optical axis (the road); none when `d` is not positive (NaN: no time).
+fn road_steps(d: f64) -> impl Iterator<Item = Vector3<f64>> {
+    (d > 0.0).then_some([-d, d]).into_iter().flatten().map(|s| Vector3::new(0.0, 0.0, s))
 }
 
 /// Squared Mahalanobis distance of the image residual (`rx`, `ry`) under Σ = `s2` I + d dᵀ: the
