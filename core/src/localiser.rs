@@ -347,6 +347,7 @@ impl Localiser {
         self.sem.labelled = false;
         network.label(left, &mut self.sem.labels[..n])?;
         self.sem.labelled = true;
+        self.tracker.set_network_labels(true);
         self.sem.build_weights(self.config.semantics, (self.width, self.height))
     }
 
@@ -514,6 +515,12 @@ impl Localiser {
     /// The tracker (pose, counters, window).
     pub fn tracker(&self) -> &Tracker {
         &self.tracker
+    }
+
+    /// Says whether the labels given with [`Self::set_labels`] come from the segmentation
+    /// network ([`Tracker::set_network_labels`]; [`Self::label_with`] says so itself).
+    pub fn set_network_labels(&mut self, on: bool) {
+        self.tracker.set_network_labels(on);
     }
 
     /// The last frame the front end built (features with stereo depth and semantics).

@@ -362,6 +362,7 @@ impl Pipeline {
     pub fn set_segmenter(&mut self, segmenter: Segmenter) {
         self.segmenter = Some(segmenter);
         self.prefetched = None;
+        self.loc.set_network_labels(true);
     }
 
     /// The network segmenter, if one is set.

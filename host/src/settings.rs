@@ -201,6 +201,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("tracker.em.tau_orb", "ORB distance scale of the likelihood, bits per nat."),
     ("tracker.em.tau_sem", "Semantic descriptor distance scale, bits per nat."),
     ("tracker.em.class_prior", "Dirichlet prior count per class of a landmark's class histogram."),
+    ("tracker.em.class_term", "When the class term (how often a landmark was seen with the feature's class) scores candidates: \"always\", \"not-network\" (not with labels from the network, whose errors on KITTI it would follow) or \"never\"."),
     ("tracker.em.max_hamming", "Largest ORB distance of an EM candidate, bits."),
     ("tracker.em.min_weight", "Weights below this leave a pair out of the M-step."),
     ("tracker.em.final_refine", "One last M-step on the kept pairs with outlier rounds."),

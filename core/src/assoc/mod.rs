@@ -21,7 +21,7 @@
 pub mod em;
 pub(crate) mod hard;
 
-pub use em::{class_log_likelihood, normalise, semantic_log_likelihood, EmParams};
+pub use em::{class_log_likelihood, normalise, semantic_log_likelihood, ClassTerm, EmParams};
 pub(crate) use em::{EmInput, EmScratch};
 pub(crate) use hard::{FeatureGrid, ProjectionSearch, SearchQuery, LN_SCALE};
 

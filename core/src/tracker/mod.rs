@@ -314,6 +314,8 @@ pub struct Tracker {
     em: EmScratch,
     motion_aware: bool,
     motion: MotionScratch,
+    /// Whether the labels come from the segmentation network ([`Self::set_network_labels`]).
+    network_labels: bool,
     /// Whether the last frame was tracked against the map (its matches and the pose
     /// problem's outlier flags describe it).
     solved: bool,
@@ -362,6 +364,7 @@ impl Tracker {
             em: EmScratch::new(),
             motion_aware: false,
             motion: MotionScratch::new(),
+            network_labels: false,
             solved: false,
         })
     }
@@ -372,6 +375,17 @@ impl Tracker {
     /// ([`crate::seg::WeightScheme::Motion`]).
     pub fn set_motion_aware(&mut self, on: bool) {
         self.motion_aware = on;
+    }
+
+    /// Says whether the frames' labels come from the segmentation network (set by whoever
+    /// supplies them; off at first). EM's class term depends on it ([`EmParams::class_term`]).
+    pub fn set_network_labels(&mut self, on: bool) {
+        self.network_labels = on;
+    }
+
+    /// Whether the frames' labels come from the segmentation network.
+    pub fn network_labels(&self) -> bool {
+        self.network_labels
     }
 
     /// Whether motion-aware semantics are on.
@@ -653,6 +667,7 @@ impl Tracker {
                 params: &self.params.em,
                 null_max_hamming: self.params.max_hamming,
                 far_m: self.problem.far_m,
+                class_term: self.params.em.class_term.applies(self.network_labels),
             };
             let em =
                 self.em.associate(&input, &mut self.t_cw, &mut self.problem, &mut self.matches);

@@ -258,6 +258,28 @@ mod tests {
     use prost::Message;
     use std::path::Path;
 
+    /// A pipeline given the network tells the tracker its labels are the network's, so EM
+    /// leaves out the class term by default (`tracker.em.class_term = "not-network"`).
+    #[test]
+    fn a_pipeline_with_a_network_says_its_labels_are_the_networks() {
+        let bytes = tiny_onnx(24, 32).encode_to_vec();
+        let g = OnnxGraph::from_bytes(&bytes, Path::new("tiny.onnx")).unwrap();
+        let q = tiny_quant(&bytes).unwrap();
+        let blob = convert(&g, &q, Path::new("q.json")).unwrap().encode().unwrap();
+        let calib = crate::dataset::StereoCalib {
+            fx_px: 50.0,
+            fy_px: 50.0,
+            cx_px: 32.0,
+            cy_px: 24.0,
+            baseline_m: 0.5,
+        };
+        let params = semloc_core::tracker::TrackerParams::default();
+        let mut pipe = crate::pipeline::Pipeline::new(&calib, 64, 48, params, 1).unwrap();
+        assert!(!pipe.tracker().network_labels());
+        pipe.set_segmenter(Segmenter::new(blob).unwrap());
+        assert!(pipe.tracker().network_labels());
+    }
+
     /// Converter round trip: the tiny net in tract (f32) and converted to int8 in the core
     /// label a frame alike, and the fast and reference kernels agree bit for bit.
     #[test]
