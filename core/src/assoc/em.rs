@@ -11,9 +11,10 @@
 //!   landmark in the window"): `w_kj = p_kj / (p_0j + Σ_k' p_k'j)`. The log-likelihood of a
 //!   pair is a sum of terms in nats: geometry `−χ²/2` of the reprojection, appearance
 //!   `−d_ORB/τ_orb`, class `log p(c_j | k)` from the landmark's class histogram with a
-//!   Dirichlet prior ([`class_log_likelihood`]) and semantic shape `−d_sem/τ_sem` when both
-//!   sides carry a semantic descriptor ([`semantic_log_likelihood`]). The null hypothesis
-//!   scores a candidate that sits exactly at every gate.
+//!   Dirichlet prior ([`class_log_likelihood`]; by default not with the network's labels, see
+//!   [`ClassTerm`]) and semantic shape `−d_sem/τ_sem` when both sides carry a semantic
+//!   descriptor ([`semantic_log_likelihood`]). The null hypothesis scores a candidate that
+//!   sits exactly at every gate.
 //! - **M-step.** Weighted motion-only pose optimisation: every pair with `w_kj` above
 //!   [`EmParams::min_weight`] enters Gauss-Newton with its residual scaled by `w_kj`
 //!   (`X = argmin Σ_jk w_kj ‖r_kj(X)‖²_Σ`), one robust round per EM iteration.
