@@ -15,6 +15,16 @@
 use crate::geom::StereoCamera;
 use crate::ransac::XorShift64;
 
+/// Runs `f` on a thread with a 1 GiB stack and returns its result: the map, tracker and
+/// localiser are tens of MiB of fixed arrays, which the ECU keeps in static memory and a test
+/// builds on its stack. The stack is only reserved; pages are touched as the test uses them.
+/// A panic in `f` fails the calling test. Unit tests only (it needs `std`): under the `testing`
+/// feature this module builds `no_std`.
+#[cfg(test)]
+pub fn on_big_stack<T: Send + 'static, F: FnOnce() -> T + Send + 'static>(f: F) -> T {
+    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap()
+}
+
 /// KITTI odometry 00–02 grey pair (`P0`/`P1` of `calib.txt`): `fx = fy = 718.856 px`,
 /// principal point `(607.19, 185.22) px`, baseline 0.537 m.
 pub const fn kitti_cam() -> StereoCamera {

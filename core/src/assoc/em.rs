@@ -402,70 +402,65 @@ mod tests {
     #[test]
     fn without_the_class_term_the_labels_do_not_move_the_weights() {
         // The map is ~13 MiB: build it on a thread with room for it.
-        std::thread::Builder::new()
-            .stack_size(64 << 20)
-            .spawn(|| {
-                let cam = crate::testing::kitti_cam();
-                let mut map = std::boxed::Box::new(Map::new());
-                map.clear();
-                // Two landmarks 10 m ahead: `a` exactly where the feature is, seen five times
-                // as building (1); `b` 1.5 px to the right, seen five times as vegetation (4).
-                let pa = nalgebra::Vector3::new(0.0, 0.0, 10.0);
-                let pb = nalgebra::Vector3::new(1.5 * 10.0 / cam.fx_px, 0.0, 10.0);
-                let a = map.new_landmark(pa, [0; 32], 0, 10.0).unwrap();
-                let b = map.new_landmark(pb, [0; 32], 0, 10.0).unwrap();
-                map.lm_mut(a).class_hist[1] = 5;
-                map.lm_mut(b).class_hist[4] = 5;
-                let weights = |class: u8, class_term: bool| {
-                    let mut frame = Frame::new();
-                    let (u, v) = (cam.cx_px as f32, cam.cy_px as f32);
-                    let ur = u - (cam.fx_px * cam.baseline_m / 10.0) as f32;
-                    let f = crate::frame::Feature {
-                        x: u,
-                        y: v,
-                        level: 0,
-                        angle: 0.0,
-                        desc: [0; 32],
-                        ur,
-                        depth_m: 10.0,
-                        class,
-                    };
-                    frame.features.push(f).unwrap();
-                    let mut scratch = std::boxed::Box::new(EmScratch::new());
-                    scratch.cands[0].insert(Candidate { lm: a, hamming: 20 });
-                    scratch.cands[0].insert(Candidate { lm: b, hamming: 20 });
-                    let params = EmParams::default();
-                    let input = EmInput {
-                        frame: &frame,
-                        window: &map,
-                        cam: &cam,
-                        params: &params,
-                        null_max_hamming: 100,
-                        far_m: 40.0 * cam.baseline_m as f32,
-                        class_term,
-                    };
-                    let (mut ids, mut w) = ([0u32; MAX_CANDIDATES], [0.0f64; MAX_CANDIDATES]);
-                    let k = scratch.e_step(&input, &Se3::identity(), 0, &mut ids, &mut w);
-                    assert_eq!(k, 2);
-                    let wa = if ids[0] == a { w[0] } else { w[1] };
-                    let wb = if ids[0] == b { w[0] } else { w[1] };
-                    (wa, wb)
+        crate::testing::on_big_stack(|| {
+            let cam = crate::testing::kitti_cam();
+            let mut map = std::boxed::Box::new(Map::new());
+            map.clear();
+            // Two landmarks 10 m ahead: `a` exactly where the feature is, seen five times
+            // as building (1); `b` 1.5 px to the right, seen five times as vegetation (4).
+            let pa = nalgebra::Vector3::new(0.0, 0.0, 10.0);
+            let pb = nalgebra::Vector3::new(1.5 * 10.0 / cam.fx_px, 0.0, 10.0);
+            let a = map.new_landmark(pa, [0; 32], 0, 10.0).unwrap();
+            let b = map.new_landmark(pb, [0; 32], 0, 10.0).unwrap();
+            map.lm_mut(a).class_hist[1] = 5;
+            map.lm_mut(b).class_hist[4] = 5;
+            let weights = |class: u8, class_term: bool| {
+                let mut frame = Frame::new();
+                let (u, v) = (cam.cx_px as f32, cam.cy_px as f32);
+                let ur = u - (cam.fx_px * cam.baseline_m / 10.0) as f32;
+                let f = crate::frame::Feature {
+                    x: u,
+                    y: v,
+                    level: 0,
+                    angle: 0.0,
+                    desc: [0; 32],
+                    ur,
+                    depth_m: 10.0,
+                    class,
                 };
-                // With the class term a vegetation feature goes to the vegetation landmark
-                // despite the 1.5 px; a building feature to the building one.
-                let (wa, wb) = weights(4, true);
-                assert!(wb > 0.5 && wa < wb, "class term on, vegetation: {wa} vs {wb}");
-                let (wa, wb) = weights(1, true);
-                assert!(wa > 0.5 && wb < wa, "class term on, building: {wa} vs {wb}");
-                // Without it geometry and appearance alone decide, whatever the label.
-                let (wa, wb) = weights(4, false);
-                assert!(wa > wb, "class term off: {wa} vs {wb}");
-                assert_eq!(weights(1, false), (wa, wb));
-                assert_eq!(weights(VOID, false), (wa, wb));
-            })
-            .unwrap()
-            .join()
-            .unwrap();
+                frame.features.push(f).unwrap();
+                let mut scratch = std::boxed::Box::new(EmScratch::new());
+                scratch.cands[0].insert(Candidate { lm: a, hamming: 20 });
+                scratch.cands[0].insert(Candidate { lm: b, hamming: 20 });
+                let params = EmParams::default();
+                let input = EmInput {
+                    frame: &frame,
+                    window: &map,
+                    cam: &cam,
+                    params: &params,
+                    null_max_hamming: 100,
+                    far_m: 40.0 * cam.baseline_m as f32,
+                    class_term,
+                };
+                let (mut ids, mut w) = ([0u32; MAX_CANDIDATES], [0.0f64; MAX_CANDIDATES]);
+                let k = scratch.e_step(&input, &Se3::identity(), 0, &mut ids, &mut w);
+                assert_eq!(k, 2);
+                let wa = if ids[0] == a { w[0] } else { w[1] };
+                let wb = if ids[0] == b { w[0] } else { w[1] };
+                (wa, wb)
+            };
+            // With the class term a vegetation feature goes to the vegetation landmark
+            // despite the 1.5 px; a building feature to the building one.
+            let (wa, wb) = weights(4, true);
+            assert!(wb > 0.5 && wa < wb, "class term on, vegetation: {wa} vs {wb}");
+            let (wa, wb) = weights(1, true);
+            assert!(wa > 0.5 && wb < wa, "class term on, building: {wa} vs {wb}");
+            // Without it geometry and appearance alone decide, whatever the label.
+            let (wa, wb) = weights(4, false);
+            assert!(wa > wb, "class term off: {wa} vs {wb}");
+            assert_eq!(weights(1, false), (wa, wb));
+            assert_eq!(weights(VOID, false), (wa, wb));
+        });
     }
 
     #[test]

@@ -8,6 +8,7 @@ use std::vec::Vec;
 
 use super::*;
 use crate::seg::WeightScheme;
+use crate::testing::on_big_stack;
 
 const W: usize = 320;
 const H: usize = 96;
@@ -44,10 +45,6 @@ fn localiser(semantics: Option<WeightScheme>) -> Box<Localiser> {
     let mut c = LocaliserConfig::new(cam(), W as u32, H as u32);
     c.semantics = semantics;
     Box::new(Localiser::new(&c).unwrap())
-}
-
-fn on_big_stack<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap();
 }
 
 #[test]

@@ -7,7 +7,7 @@ use std::vec::Vec as StdVec;
 const W: u32 = 1241;
 const H: u32 = 376;
 
-use crate::testing::{kitti_cam as cam, Rng};
+use crate::testing::{kitti_cam as cam, on_big_stack, Rng};
 
 /// A landmark of the synthetic world: position, descriptor and the distance at which it
 /// appears on pyramid level 0 (closer, it is found on higher levels, as a real detector
@@ -78,13 +78,9 @@ fn render(pts: &[Point], t_wc: &Se3, rng: &mut Rng) -> Frame {
     f
 }
 
-fn run_on_big_stack<T: Send + 'static, F: FnOnce() -> T + Send + 'static>(f: F) -> T {
-    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap()
-}
-
 #[test]
 fn tracks_a_synthetic_drive() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
@@ -107,7 +103,7 @@ fn tracks_a_synthetic_drive() {
 
 #[test]
 fn em_association_tracks_a_synthetic_drive() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let params = TrackerParams { association: Association::Em, ..TrackerParams::default() };
@@ -128,7 +124,7 @@ fn em_association_tracks_a_synthetic_drive() {
 
 #[test]
 fn coasting_bridges_skipped_frames() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
@@ -155,7 +151,7 @@ fn coasting_bridges_skipped_frames() {
 
 #[test]
 fn loss_is_counted_and_the_map_restarts() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(42);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
@@ -174,7 +170,7 @@ fn loss_is_counted_and_the_map_restarts() {
 
 #[test]
 fn too_few_stereo_points_waits_for_initialisation() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
         let rep = tracker.process(&Frame::new());
         assert_eq!(rep.state, TrackState::Uninitialised);
@@ -184,7 +180,7 @@ fn too_few_stereo_points_waits_for_initialisation() {
 
 #[test]
 fn bad_image_size_is_an_error() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         assert_eq!(
             Tracker::new(cam(), 0, 10, TrackerParams::default()).err(),
             Some(TrackerError::BadImageSize { width: 0, height: 10 })
@@ -213,7 +209,7 @@ fn tracker_memory_is_reported() {
 
 #[test]
 fn a_standing_camera_culls_redundant_keyframes() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
@@ -233,7 +229,7 @@ fn a_standing_camera_culls_redundant_keyframes() {
 
 #[test]
 fn far_points_are_mapped_by_triangulation_within_capacity() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0xdead_beef_cafe_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
@@ -268,7 +264,7 @@ fn car(rng: &mut Rng, c: Vector3<f64>, n: usize) -> StdVec<Point> {
 /// the parked cars' features are used, the moving car's removed, and the pose stays right.
 #[test]
 fn motion_aware_tracking_keeps_parked_cars_and_drops_a_moving_one() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0x9a4c_ed00_0000_0007);
         let pts = world(&mut rng);
         let mut parked = StdVec::new();
@@ -329,7 +325,7 @@ fn motion_aware_tracking_keeps_parked_cars_and_drops_a_moving_one() {
 /// almost all of their passes are evidence.
 #[test]
 fn landmark_passes_of_a_car_at_our_speed_are_no_evidence() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0x9a4c_ed00_0000_0011);
         let pts = world(&mut rng);
         let mut parked = StdVec::new();
@@ -403,7 +399,7 @@ fn people(rng: &mut Rng, c: Vector3<f64>, n: usize) -> StdVec<Point> {
 #[test]
 fn people_walking_away_are_not_parked_by_their_first_passes() {
     let count = |slow_human_mps: f32| {
-        run_on_big_stack(move || {
+        on_big_stack(move || {
             let mut rng = Rng::new(0x9a4c_ed00_0000_0021);
             let pts = world(&mut rng);
             let walkers = people(&mut rng, Vector3::new(3.5, 1.6, 22.0), 120);
@@ -449,7 +445,7 @@ fn people_walking_away_are_not_parked_by_their_first_passes() {
 
 #[test]
 fn feature_use_reports_inliers_and_rejected_outliers() {
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         let mut rng = Rng::new(0x005e_ed0f_f00d);
         let pts = world(&mut rng);
         let mut tracker = Box::new(Tracker::new(cam(), W, H, TrackerParams::default()).unwrap());
@@ -527,7 +523,7 @@ fn the_first_frame_after_initialisation_is_matched_by_appearance() {
     // points are found within the search radius, and they fix rotation but not translation. The
     // pose then stayed ~2 m behind (or not, depending on RANSAC's draws); matched by appearance
     // the near facades give the translation whatever the seed.
-    run_on_big_stack(|| {
+    on_big_stack(|| {
         for seed in 0..4u64 {
             let mut rng = Rng::new(0x0123_4567_89ab_cdef);
             let pts = highway(&mut rng);

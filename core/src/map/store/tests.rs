@@ -1,4 +1,5 @@
 use super::*;
+use crate::testing::on_big_stack;
 
 fn feats(n: usize) -> std::vec::Vec<Feature> {
     (0..n)
@@ -13,11 +14,6 @@ fn feats(n: usize) -> std::vec::Vec<Feature> {
             class: crate::seg::VOID,
         })
         .collect()
-}
-
-/// The map is ~13 MiB: tests build it on a thread with room for it.
-fn big_stack<F: FnOnce() + Send + 'static>(f: F) {
-    std::thread::Builder::new().stack_size(64 << 20).spawn(f).unwrap().join().unwrap();
 }
 
 fn new_map() -> std::boxed::Box<Map> {
@@ -42,7 +38,7 @@ fn covis_by_scan(m: &Map, a: u8, b: u8) -> u16 {
 
 #[test]
 fn covisibility_stays_exact_through_adds_removals_and_merges() {
-    big_stack(|| {
+    on_big_stack(|| {
         let mut m = new_map();
         let f = feats(8);
         let a = m.push_keyframe(0, Se3::identity(), &f, 0).unwrap();
@@ -83,7 +79,7 @@ fn covisibility_stays_exact_through_adds_removals_and_merges() {
 
 #[test]
 fn landmarks_die_with_their_last_observation() {
-    big_stack(|| {
+    on_big_stack(|| {
         let mut m = new_map();
         let f = feats(4);
         let a = m.push_keyframe(0, Se3::identity(), &f, 0).unwrap();
@@ -105,7 +101,7 @@ fn landmarks_die_with_their_last_observation() {
 
 #[test]
 fn a_full_store_evicts_the_least_recently_used_keyframe() {
-    big_stack(|| {
+    on_big_stack(|| {
         let mut m = new_map();
         let f = feats(2);
         for i in 0..MAX_KEYFRAMES as u32 {
@@ -130,7 +126,7 @@ fn a_full_store_evicts_the_least_recently_used_keyframe() {
 
 #[test]
 fn a_full_observation_list_drops_the_oldest_keyframe() {
-    big_stack(|| {
+    on_big_stack(|| {
         let mut m = new_map();
         let f = feats(1);
         let id = lm(&mut m);
@@ -151,7 +147,7 @@ fn a_full_observation_list_drops_the_oldest_keyframe() {
 
 #[test]
 fn landmark_store_overflow_is_counted() {
-    big_stack(|| {
+    on_big_stack(|| {
         let mut m = new_map();
         for _ in 0..MAX_LANDMARKS {
             assert!(m.new_landmark(Vector3::zeros(), [0; 32], 0, 1.0).is_some());
@@ -165,7 +161,7 @@ fn landmark_store_overflow_is_counted() {
 
 #[test]
 fn best_covisible_orders_by_shared_landmarks() {
-    big_stack(|| {
+    on_big_stack(|| {
         let mut m = new_map();
         let f = feats(10);
         let a = m.push_keyframe(0, Se3::identity(), &f, 0).unwrap();
