@@ -18,3 +18,12 @@ pub fn shared_data() -> Option<PathBuf> {
         None
     }
 }
+
+/// Runs `f` on a thread with a 1 GiB stack and returns its result: core's map, tracker and
+/// localiser are tens of MiB of fixed arrays, which the ECU keeps in static memory and a test
+/// builds on its stack. The stack is only reserved; pages are touched as the test uses them.
+/// A panic in `f` fails the calling test. (Core's own unit tests have
+/// `semloc_core::testing::on_big_stack`, which exists only under `cfg(test)` there.)
+pub fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap()
+}

@@ -21,6 +21,7 @@ use semloc_core::geom::StereoCamera;
 use semloc_core::localiser::{Localiser, LocaliserConfig, Network, NetworkMemory};
 use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
+use semloc_tests::on_big_stack;
 
 thread_local! {
     /// Allocations and reallocations made by this thread so far. A `const` initialiser and a
@@ -151,10 +152,6 @@ fn synthetic_pair(w: usize, h: usize, shift: usize) -> (Vec<u8>, Vec<u8>) {
         }
     }
     (l, r)
-}
-
-fn on_big_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
-    std::thread::Builder::new().stack_size(1 << 30).spawn(f).unwrap().join().unwrap()
 }
 
 fn synthetic_frames() -> Clip {

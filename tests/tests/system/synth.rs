@@ -270,29 +270,24 @@ fn orb_and_stereo_statistics_vs_kitti() {
         b: f32,
     ) -> (usize, usize, u32, [usize; 8]) {
         let (l, r) = (l.clone(), r.clone());
-        std::thread::Builder::new()
-            .stack_size(1 << 30)
-            .spawn(move || {
-                let (w, h) = (l.width() as usize, l.height() as usize);
-                let f = f64::from(bf / b);
-                let cam =
-                    StereoCamera::new(f, f, w as f64 / 2.0, h as f64 / 2.0, f64::from(b)).unwrap();
-                let config = LocaliserConfig::new(cam, w as u32, h as u32);
-                let mut loc = Box::new(Localiser::new(&config).unwrap());
-                let lv = ImageView::from_slice(l.as_raw(), w, h).unwrap();
-                let rv = ImageView::from_slice(r.as_raw(), w, h).unwrap();
-                loc.extract(&lv, &rv).unwrap();
-                let st = loc.match_stereo(0.0).unwrap();
-                let left = loc.left_extractor().features();
-                let mut levels = [0usize; 8];
-                for kp in left.keypoints() {
-                    levels[(kp.level as usize).min(7)] += 1;
-                }
-                (left.len(), loc.frame().stereo_count(), st.median_sad, levels)
-            })
-            .unwrap()
-            .join()
-            .unwrap()
+        semloc_tests::on_big_stack(move || {
+            let (w, h) = (l.width() as usize, l.height() as usize);
+            let f = f64::from(bf / b);
+            let cam =
+                StereoCamera::new(f, f, w as f64 / 2.0, h as f64 / 2.0, f64::from(b)).unwrap();
+            let config = LocaliserConfig::new(cam, w as u32, h as u32);
+            let mut loc = Box::new(Localiser::new(&config).unwrap());
+            let lv = ImageView::from_slice(l.as_raw(), w, h).unwrap();
+            let rv = ImageView::from_slice(r.as_raw(), w, h).unwrap();
+            loc.extract(&lv, &rv).unwrap();
+            let st = loc.match_stereo(0.0).unwrap();
+            let left = loc.left_extractor().features();
+            let mut levels = [0usize; 8];
+            for kp in left.keypoints() {
+                levels[(kp.level as usize).min(7)] += 1;
+            }
+            (left.len(), loc.frame().stereo_count(), st.median_sad, levels)
+        })
     }
 
     let kitti = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/kitti-raw");
