@@ -166,16 +166,43 @@ struct StartsRow {
     /// and the largest such ratio.
     ate_ratio_geomean: f64,
     ate_ratio_worst: f64,
+    /// Standard error of the mean log ratio (sample standard deviation / sqrt(n); NaN, written
+    /// as null, from fewer than two starts): `geomean · exp(±2 se)` is a rough 95 % interval.
+    ate_ratio_log_se: f64,
+    /// The starts from which the row's ATE is below the first row's.
+    ate_better_starts: usize,
     rpe_1f_trans_ratio_geomean: f64,
     rpe_1f_rot_ratio_geomean: f64,
 }
 
-/// Geometric mean of `a[i] / b[i]` and the largest ratio (NaN when a pair is not positive).
-fn ratio_stats(a: &[f64], b: &[f64]) -> (f64, f64) {
+/// Paired ratios `a[i] / b[i]` summarised on the log scale, where a ratio and its inverse
+/// weigh alike (NaN when a pair is not positive).
+struct RatioStats {
+    geomean: f64,
+    worst: f64,
+    /// Standard error of the mean log ratio; NaN from fewer than two pairs.
+    log_se: f64,
+    /// Pairs with `a[i] < b[i]`.
+    better: usize,
+}
+
+fn ratio_stats(a: &[f64], b: &[f64]) -> RatioStats {
     let logs: Vec<f64> = a.iter().zip(b).map(|(x, y)| (x / y).ln()).collect();
-    let mean = logs.iter().sum::<f64>() / logs.len().max(1) as f64;
+    let n = logs.len();
+    let mean = logs.iter().sum::<f64>() / n.max(1) as f64;
     let worst = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    (mean.exp(), worst.exp())
+    let log_se = if n < 2 {
+        f64::NAN
+    } else {
+        let var = logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        (var / n as f64).sqrt()
+    };
+    RatioStats {
+        geomean: mean.exp(),
+        worst: worst.exp(),
+        log_se,
+        better: logs.iter().filter(|&&l| l < 0.0).count(),
+    }
 }
 
 /// The rows' figures over the first frames of `per_start` (one row list per first frame, the
@@ -202,15 +229,17 @@ fn starts_rows(per_start: &[&[Row]]) -> Result<Vec<StartsRow>> {
         .iter()
         .zip(cols)
         .map(|(r, [ate, rt, rr])| {
-            let (ate_g, ate_w) = ratio_stats(&ate, &base[0]);
+            let a = ratio_stats(&ate, &base[0]);
             StartsRow {
                 semantics: r.semantics.name().to_owned(),
                 association: association_name(r.assoc),
                 ate_median_m: median_min_max(&ate).0,
-                ate_ratio_geomean: ate_g,
-                ate_ratio_worst: ate_w,
-                rpe_1f_trans_ratio_geomean: ratio_stats(&rt, &base[1]).0,
-                rpe_1f_rot_ratio_geomean: ratio_stats(&rr, &base[2]).0,
+                ate_ratio_geomean: a.geomean,
+                ate_ratio_worst: a.worst,
+                ate_ratio_log_se: a.log_se,
+                ate_better_starts: a.better,
+                rpe_1f_trans_ratio_geomean: ratio_stats(&rt, &base[1]).geomean,
+                rpe_1f_rot_ratio_geomean: ratio_stats(&rr, &base[2]).geomean,
                 ate_rmse_m: ate,
                 rpe_1f_trans_rmse_m: rt,
                 rpe_1f_rot_rmse_deg: rr,
@@ -226,23 +255,37 @@ fn starts_table(rows: &[StartsRow], starts: &[usize]) -> String {
     let list: Vec<String> = starts.iter().map(ToString::to_string).collect();
     let _ = writeln!(
         s,
-        "\nover {} first frames ({}): ratio to {base} from the same frame, geometric mean (worst)",
+        "\nover {} first frames ({}): ratio to {base} from the same frame, geometric mean ± the \
+         standard error of its log, the worst ratio and the starts where the row is better",
         starts.len(),
         list.join(", ")
     );
     let _ = writeln!(
         s,
-        "{:<10}{:<6}{:>15}{:>20}{:>24}",
-        "semantics", "assoc", "ATE median [m]", "ATE ratio", "RPE 1f ratio (t / rot)"
+        "{:<10}{:<6}{:>15}{:>17}{:>7}{:>8}{:>24}",
+        "semantics",
+        "assoc",
+        "ATE median [m]",
+        "ATE ratio",
+        "worst",
+        "better",
+        "RPE 1f ratio (t / rot)"
     );
     for r in rows {
+        let se = if r.ate_ratio_log_se.is_finite() {
+            format!(" ± {:.3}", r.ate_ratio_log_se)
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             s,
-            "{:<10}{:<6}{:>15.4}{:>20}{:>24}",
+            "{:<10}{:<6}{:>15.4}{:>17}{:>7.2}{:>8}{:>24}",
             r.semantics,
             r.association,
             r.ate_median_m,
-            format!("{:.3} ({:.2})", r.ate_ratio_geomean, r.ate_ratio_worst),
+            format!("{:.3}{se}", r.ate_ratio_geomean),
+            r.ate_ratio_worst,
+            format!("{}/{}", r.ate_better_starts, starts.len()),
             format!("{:.3} / {:.3}", r.rpe_1f_trans_ratio_geomean, r.rpe_1f_rot_ratio_geomean)
         );
     }
@@ -817,5 +860,24 @@ mod tests {
         let mut s = String::new();
         write_shares(&mut s, "head", [("x / em".to_owned(), &none)], split);
         assert_eq!(s, "");
+    }
+
+    /// Paired ratios on the log scale: 2x and 0.5x cancel, the standard error is that of the
+    /// mean log ratio, a tie is not "better", and one pair has no standard error.
+    #[test]
+    fn ratio_statistics_over_starts() {
+        let r = ratio_stats(&[2.0, 1.0, 3.0, 0.5], &[1.0, 2.0, 3.0, 1.0]);
+        let l2 = 2f64.ln();
+        let logs = [l2, -l2, 0.0, -l2];
+        let mean = -l2 / 4.0;
+        let var = logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / 3.0;
+        assert!((r.geomean - mean.exp()).abs() < 1e-15, "{}", r.geomean);
+        assert!((r.worst - 2.0).abs() < 1e-15);
+        assert!((r.log_se - (var / 4.0).sqrt()).abs() < 1e-15, "{}", r.log_se);
+        assert_eq!(r.better, 2);
+        let one = ratio_stats(&[0.9], &[1.0]);
+        assert!(one.log_se.is_nan());
+        assert_eq!(one.better, 1);
+        assert!((one.geomean - 0.9).abs() < 1e-15);
     }
 }

@@ -458,6 +458,14 @@ fn ablate_first_frames_runs_every_row_from_each_start() {
         over[0]["ate_rmse_m"].as_array().unwrap().iter().map(|a| a.as_f64().unwrap()).collect();
     let geo = ((ates[0] / base_ates[0]).ln() + (ates[1] / base_ates[1]).ln()) / 2.0;
     assert!((em["ate_ratio_geomean"].as_f64().unwrap() - geo.exp()).abs() < 1e-12, "{em}");
+    // Two starts: the standard error of the mean log ratio is half their difference.
+    let (l0, l1) = ((ates[0] / base_ates[0]).ln(), (ates[1] / base_ates[1]).ln());
+    let se = em["ate_ratio_log_se"].as_f64().expect("two starts give a standard error");
+    assert!((se - (l0 - l1).abs() / 2.0).abs() < 1e-12, "{em}");
+    let better = ates.iter().zip(&base_ates).filter(|(a, b)| a < b).count() as u64;
+    assert_eq!(em["ate_better_starts"].as_u64(), Some(better), "{em}");
+    assert_eq!(over[0]["ate_better_starts"].as_u64(), Some(0), "a row is not better than itself");
+    assert!(stdout.contains(&format!("{better}/2")), "{stdout}");
     // Frame 3's run: its own folder, 7 of the 10 frames, the dataset's numbering recorded,
     // the same trajectory as `semloc run --first-frame 3`.
     let from3 = out.join("first-frames/off-em-from3");
