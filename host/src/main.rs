@@ -41,6 +41,10 @@ enum Command {
     /// The paper's ablation on one dataset: semantics off/cull/full x association hard/em in
     /// one invocation, one table, and the share of features on static structure (Fig. 4).
     Ablate(cli::ablate::AblateArgs),
+    /// Two `semloc ablate` results paired start by start (or seed by seed): per row, the
+    /// variant's ATE against the reference's, geometric mean ± standard error, worst, starts
+    /// better.
+    Compare(cli::compare::CompareArgs),
     /// Time the pipeline per stage, against OpenCV's ORB and a one-thread run of itself.
     Bench(cli::bench::BenchArgs),
     /// Every sequence of a KITTI odometry root, one Table-3-style table (t_rel, r_rel, ATE per
@@ -80,6 +84,7 @@ fn main() -> std::process::ExitCode {
         Command::Config(args) => cli::config::run(&args),
         Command::Run(args) => cli::run::run(&args),
         Command::Ablate(args) => cli::ablate::run(&args),
+        Command::Compare(args) => cli::compare::run(&args),
         Command::Bench(args) => cli::bench::run(&args),
         Command::BenchKitti(args) => cli::bench_kitti::run(&args),
         Command::Demo(args) => cli::demo::run(&args),

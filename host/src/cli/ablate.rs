@@ -177,16 +177,16 @@ struct StartsRow {
 
 /// Paired ratios `a[i] / b[i]` summarised on the log scale, where a ratio and its inverse
 /// weigh alike (NaN when a pair is not positive).
-struct RatioStats {
-    geomean: f64,
-    worst: f64,
+pub(crate) struct RatioStats {
+    pub geomean: f64,
+    pub worst: f64,
     /// Standard error of the mean log ratio; NaN from fewer than two pairs.
-    log_se: f64,
+    pub log_se: f64,
     /// Pairs with `a[i] < b[i]`.
-    better: usize,
+    pub better: usize,
 }
 
-fn ratio_stats(a: &[f64], b: &[f64]) -> RatioStats {
+pub(crate) fn ratio_stats(a: &[f64], b: &[f64]) -> RatioStats {
     let logs: Vec<f64> = a.iter().zip(b).map(|(x, y)| (x / y).ln()).collect();
     let n = logs.len();
     let mean = logs.iter().sum::<f64>() / n.max(1) as f64;
@@ -248,6 +248,16 @@ fn starts_rows(per_start: &[&[Row]]) -> Result<Vec<StartsRow>> {
         .collect())
 }
 
+/// A geometric-mean ratio as the tables print it: `0.914 ± 0.051`, without the standard error
+/// when there is none (one start).
+pub(crate) fn ratio_cell(geomean: f64, log_se: f64) -> String {
+    if log_se.is_finite() {
+        format!("{geomean:.3} ± {log_se:.3}")
+    } else {
+        format!("{geomean:.3}")
+    }
+}
+
 /// The `--first-frames` table.
 fn starts_table(rows: &[StartsRow], starts: &[usize]) -> String {
     let mut s = String::new();
@@ -272,18 +282,13 @@ fn starts_table(rows: &[StartsRow], starts: &[usize]) -> String {
         "RPE 1f ratio (t / rot)"
     );
     for r in rows {
-        let se = if r.ate_ratio_log_se.is_finite() {
-            format!(" ± {:.3}", r.ate_ratio_log_se)
-        } else {
-            String::new()
-        };
         let _ = writeln!(
             s,
             "{:<10}{:<6}{:>15.4}{:>17}{:>7.2}{:>8}{:>24}",
             r.semantics,
             r.association,
             r.ate_median_m,
-            format!("{:.3}{se}", r.ate_ratio_geomean),
+            ratio_cell(r.ate_ratio_geomean, r.ate_ratio_log_se),
             r.ate_ratio_worst,
             format!("{}/{}", r.ate_better_starts, starts.len()),
             format!("{:.3} / {:.3}", r.rpe_1f_trans_ratio_geomean, r.rpe_1f_rot_ratio_geomean)
@@ -767,6 +772,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         "feature_share": share,
         "first_frames": args.first_frames,
         "over_first_frames": over_starts,
+        "align": align_name(args.align),
     });
     let p = args.out.join("ablation.json");
     std::fs::write(&p, serde_json::to_string_pretty(&json)?)
@@ -776,6 +782,15 @@ pub fn run(args: &AblateArgs) -> Result<()> {
 }
 
 /// The name of a row: its folder, `semantics-assoc`.
+/// `--align`'s value as the command line spells it (`ablation.json`'s `align`).
+fn align_name(a: AlignArg) -> &'static str {
+    match a {
+        AlignArg::Se3 => "se3",
+        AlignArg::Sim3 => "sim3",
+        AlignArg::None => "none",
+    }
+}
+
 pub fn row_name(r: &Row) -> String {
     format!("{}-{}", r.semantics.name(), association_name(r.assoc))
 }

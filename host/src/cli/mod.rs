@@ -3,6 +3,7 @@
 pub mod ablate;
 pub mod bench;
 pub mod bench_kitti;
+pub mod compare;
 pub mod config;
 pub mod convert;
 pub mod demo;

@@ -466,6 +466,38 @@ fn ablate_first_frames_runs_every_row_from_each_start() {
     assert_eq!(em["ate_better_starts"].as_u64(), Some(better), "{em}");
     assert_eq!(over[0]["ate_better_starts"].as_u64(), Some(0), "a row is not better than itself");
     assert!(stdout.contains(&format!("{better}/2")), "{stdout}");
+    // `semloc compare` pairs runs the same way: off/em against off/hard of this run gives
+    // ablate's own figures; it reads the alignment the run recorded.
+    assert_eq!(v["align"].as_str(), Some("se3"), "{v}");
+    let cmp = dir.path().join("cmp.json");
+    let c_s = cmp.to_str().unwrap();
+    let o = semloc(&["compare", o_s, o_s, "--against", "off/hard", "--json", c_s]);
+    let (cout, cerr) = text(&o);
+    assert!(o.status.success(), "{cout}\n{cerr}");
+    assert!(cout.contains("aligned by se3, paired over 2 first frames (0, 3)"), "{cout}");
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cmp).unwrap()).unwrap();
+    let row = &c["rows"][1];
+    assert_eq!(
+        (row["variant_row"].as_str(), row["reference_row"].as_str()),
+        (Some("off/em"), Some("off/hard"))
+    );
+    assert_eq!(row["ate_ratio_geomean"], em["ate_ratio_geomean"], "{c}");
+    assert_eq!(row["ate_ratio_log_se"], em["ate_ratio_log_se"], "{c}");
+    assert_eq!(row["better"], em["ate_better_starts"], "{c}");
+    // One of the two starts: that start's ratio, no standard error.
+    let o = semloc(&["compare", o_s, o_s, "--against", "off/hard", "--starts", "3", "--json", c_s]);
+    assert!(o.status.success(), "{:?}", text(&o));
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&cmp).unwrap()).unwrap();
+    let r3 = c["rows"][1]["ate_ratio_geomean"].as_f64().unwrap();
+    assert!((r3 - ates[1] / base_ates[1]).abs() < 1e-12, "{c}");
+    assert!(c["rows"][1]["ate_ratio_log_se"].is_null(), "{c}");
+    // A folder without an ablation: an error naming the file it looked for.
+    let o = semloc(&["compare", o_s, dir.path().to_str().unwrap()]);
+    let (_, cerr) = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{cerr}");
+    assert!(cerr.contains("ablation.json") && cerr.contains("semloc ablate --out"), "{cerr}");
     // Frame 3's run: its own folder, 7 of the 10 frames, the dataset's numbering recorded,
     // the same trajectory as `semloc run --first-frame 3`.
     let from3 = out.join("first-frames/off-em-from3");
