@@ -72,14 +72,45 @@ pub struct AblateArgs {
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=MAX_SEEDS))]
     pub seeds: u8,
     /// Also track every row from each of these dataset frames (comma-separated, e.g.
-    /// `0,2,4,6,8,10`), each to the end (or `--max-frames` frames), and report per row the
+    /// `0,2,4,6,8,10`; `A-B` is every frame from A to B, `A-B:S` every S-th: `0-24:2` is the
+    /// same list), each to the end (or `--max-frames` frames), and report per row the
     /// geometric mean over them of its ATE and one-frame RPE relative to the first row run
     /// from the same frame, with the worst ratio. On a clip of a few dozen frames the ATE moves
     /// by tens of per cent with where tracking starts, more than most differences between
     /// rows; the ratios over several starts are what tells rows apart. The main table is the
     /// first start's; every other start's runs go to `first-frames/<row>-from<N>/`.
-    #[arg(long, value_delimiter = ',', value_name = "N,...", conflicts_with_all = ["seeds", "first_frame"])]
-    pub first_frames: Vec<usize>,
+    #[arg(long, value_delimiter = ',', value_name = "N,...", value_parser = parse_frame_span, conflicts_with_all = ["seeds", "first_frame"])]
+    pub first_frames: Vec<FrameSpan>,
+}
+
+/// One item of a frame list (`--first-frames`, `compare --starts`): `N`, `A-B` (A to B
+/// inclusive) or `A-B:S` (A, A+S, ... up to B).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameSpan(pub Vec<usize>);
+
+/// The frames of a list of [`FrameSpan`]s, in order.
+pub fn frames_of(spans: &[FrameSpan]) -> Vec<usize> {
+    spans.iter().flat_map(|s| s.0.iter().copied()).collect()
+}
+
+/// Parses one [`FrameSpan`]; the message says what is wrong with it.
+pub fn parse_frame_span(s: &str) -> core::result::Result<FrameSpan, String> {
+    let num = |t: &str| {
+        t.trim().parse::<usize>().map_err(|_| format!("{t:?} in {s:?} is not a frame number"))
+    };
+    let Some((a, rest)) = s.split_once('-') else { return Ok(FrameSpan(vec![num(s)?])) };
+    let (b, step) = match rest.split_once(':') {
+        Some((b, st)) => (b, num(st)?),
+        None => (rest, 1),
+    };
+    let (a, b) = (num(a)?, num(b)?);
+    if step == 0 {
+        return Err(format!("{s:?}: the step must be at least 1"));
+    }
+    if a > b {
+        return Err(format!("{s:?}: the range is empty ({a} > {b})"));
+    }
+    Ok(FrameSpan((a..=b).step_by(step).collect()))
 }
 
 /// Most RANSAC seeds `--seeds` runs per row.
@@ -636,8 +667,9 @@ pub fn run(args: &AblateArgs) -> Result<()> {
     // `--first-frames`: every start is checked before the output folder is touched; the main
     // table, the feature share and the overlay are the first start's (the sequence as opened
     // when there is none).
+    let first_frames = frames_of(&args.first_frames);
     let starts: Vec<Sequence> =
-        args.first_frames.iter().map(|&f| opened.starting_at(f)).collect::<Result<_, _>>()?;
+        first_frames.iter().map(|&f| opened.starting_at(f)).collect::<Result<_, _>>()?;
     let seq = starts.first().unwrap_or(&opened);
     let labelled = model.is_some() || seq.has_labels();
     if !labelled && args.semantics.iter().any(|&s| s != SemanticsArg::Off) {
@@ -668,7 +700,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
     let dir = args.out.join("first-frames");
     for (k, s) in starts.iter().enumerate().skip(1) {
         let from = || RunConfig { seq: s, ..base() };
-        let f = args.first_frames[k];
+        let f = first_frames[k];
         let more = run_rows_named(
             &from,
             &pairs,
@@ -693,11 +725,11 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         }
     );
     text.push_str(&table(&rows));
-    let over_starts = if args.first_frames.len() > 1 {
+    let over_starts = if first_frames.len() > 1 {
         let all: Vec<&[Row]> =
             core::iter::once(rows.as_slice()).chain(per_start.iter().map(Vec::as_slice)).collect();
         let r = starts_rows(&all)?;
-        text.push_str(&starts_table(&r, &args.first_frames));
+        text.push_str(&starts_table(&r, &first_frames));
         Some(r)
     } else {
         None
@@ -770,7 +802,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         "model": args.model,
         "rows": json_rows,
         "feature_share": share,
-        "first_frames": args.first_frames,
+        "first_frames": first_frames,
         "over_first_frames": over_starts,
         "align": align_name(args.align),
     });
@@ -875,6 +907,23 @@ mod tests {
         let mut s = String::new();
         write_shares(&mut s, "head", [("x / em".to_owned(), &none)], split);
         assert_eq!(s, "");
+    }
+
+    /// Frame lists: single frames, inclusive ranges, ranges with a step; what is refused.
+    #[test]
+    fn frame_spans() {
+        let p = |s: &str| parse_frame_span(s).map(|f| f.0);
+        assert_eq!(p("7"), Ok(vec![7]));
+        assert_eq!(p("3-6"), Ok(vec![3, 4, 5, 6]));
+        assert_eq!(p("0-24:2").unwrap(), (0..=24).step_by(2).collect::<Vec<_>>());
+        assert_eq!(p("1-23:2").unwrap().last(), Some(&23));
+        assert_eq!(p("5-5"), Ok(vec![5]));
+        assert!(p("6-3").unwrap_err().contains("empty"));
+        assert!(p("0-8:0").unwrap_err().contains("step"));
+        assert!(p("x").unwrap_err().contains("not a frame number"));
+        assert!(p("-3").is_err() && p("1-").is_err() && p("1-4:").is_err());
+        let spans = [FrameSpan(vec![0]), FrameSpan(vec![5, 10]), FrameSpan(vec![3])];
+        assert_eq!(frames_of(&spans), [0, 5, 10, 3], "in the order given");
     }
 
     /// Paired ratios on the log scale: 2x and 0.5x cancel, the standard error is that of the

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 
-use super::ablate::{ratio_cell, ratio_stats};
+use super::ablate::{frames_of, parse_frame_span, ratio_cell, ratio_stats, FrameSpan};
 
 /// Arguments of `semloc compare`.
 #[derive(Args, Debug)]
@@ -31,11 +31,11 @@ pub struct CompareArgs {
     /// name.
     #[arg(long, value_name = "SEMANTICS/ASSOC")]
     pub against: Option<String>,
-    /// Only these starts (dataset frame numbers, comma-separated), each one both runs were
-    /// started from: e.g. the starts no setting was chosen on. For runs paired by seed, these
-    /// seeds.
-    #[arg(long, value_delimiter = ',', value_name = "N,...")]
-    pub starts: Vec<usize>,
+    /// Only these starts (dataset frame numbers, comma-separated; `A-B` and `A-B:S` as in
+    /// `ablate --first-frames`), each one both runs were started from: e.g. the starts no
+    /// setting was chosen on, `1-23:2`. For runs paired by seed, these seeds.
+    #[arg(long, value_delimiter = ',', value_name = "N,...", value_parser = parse_frame_span)]
+    pub starts: Vec<FrameSpan>,
     /// Also write the comparison as JSON here (see docs/outputs.md).
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
@@ -340,7 +340,8 @@ fn table(reference: &Ablation, var: &Ablation, keys: &[usize], rows: &[Paired]) 
 pub fn run(args: &CompareArgs) -> Result<()> {
     let reference = load(&args.reference)?;
     let var = load(&args.variant)?;
-    let (keys, rows, notes) = compare(&reference, &var, args.against.as_deref(), &args.starts)?;
+    let (keys, rows, notes) =
+        compare(&reference, &var, args.against.as_deref(), &frames_of(&args.starts))?;
     super::print_warnings(&notes);
     super::write_stdout(&table(&reference, &var, &keys, &rows));
     if let Some(p) = &args.json {

@@ -439,7 +439,8 @@ fn ablate_first_frames_runs_every_row_from_each_start() {
     let out = dir.path().join("abl");
     let o_s = out.to_str().unwrap();
     let base = ["ablate", &data, "--out", o_s, "--force", "--semantics", "off"];
-    let o = semloc(&[&base[..], &["--first-frames", "0,3"]].concat());
+    // `0-3:3` is frames 0 and 3.
+    let o = semloc(&[&base[..], &["--first-frames", "0-3:3"]].concat());
     let (stdout, err) = text(&o);
     assert!(o.status.success(), "{stdout}\n{err}");
     assert!(stdout.contains("over 2 first frames (0, 3): ratio to off/hard"), "{stdout}");
@@ -541,6 +542,11 @@ fn ablate_first_frames_runs_every_row_from_each_start() {
         let o = semloc(&[&base[..], &["--first-frames", "0,3"], &extra[..]].concat());
         assert_eq!(o.status.code(), Some(2), "{extra:?}: {:?}", text(&o));
     }
+    // A range that names no frame is a usage error saying so.
+    let o = semloc(&[&base[..], &["--first-frames", "0,5-2"]].concat());
+    let (_, err) = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("\"5-2\": the range is empty"), "{err}");
 }
 
 #[test]
