@@ -77,6 +77,9 @@ struct Ablation {
     keys: Vec<usize>,
     /// `semantics/association` → ATE per key.
     rows: BTreeMap<String, Vec<f64>>,
+    /// `semantics/association` → one-frame RPE (translation m, rotation deg) per key; NaN where
+    /// the file has none (runs paired by seed, or too few frames).
+    rpe: BTreeMap<String, [Vec<f64>; 2]>,
     /// Row names in the file's order.
     order: Vec<String>,
 }
@@ -122,7 +125,13 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
         Ok(format!("{s}/{a}"))
     };
     let mut rows = BTreeMap::new();
+    let mut rpe = BTreeMap::new();
     let mut order = Vec::new();
+    // RPE lists may hold null (a NaN written by serde_json): kept as NaN.
+    let maybe_nums = |x: &serde_json::Value, n: usize| -> Vec<f64> {
+        let a = x.as_array().map(Vec::as_slice).unwrap_or_default();
+        (0..n).map(|i| a.get(i).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN)).collect()
+    };
     let (unit, keys) = if let Some(over) = v["over_first_frames"].as_array() {
         let keys: Vec<usize> = v["first_frames"]
             .as_array()
@@ -136,6 +145,8 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
             if ates.len() != keys.len() {
                 bail!("{n} has {} ATEs for {} first frames", ates.len(), keys.len());
             }
+            let t = maybe_nums(&r["rpe_1f_trans_rmse_m"], keys.len());
+            rpe.insert(n.clone(), [t, maybe_nums(&r["rpe_1f_rot_rmse_deg"], keys.len())]);
             order.push(n.clone());
             rows.insert(n, ates);
         }
@@ -156,6 +167,11 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
             if ates.is_empty() {
                 bail!("{n} has no ATE (the dataset has no ground truth, or the run failed)");
             }
+            let one = |k: &str| {
+                let x = r[k].as_f64().filter(|_| seeds == 1).unwrap_or(f64::NAN);
+                vec![x; ates.len()]
+            };
+            rpe.insert(n.clone(), [one("rpe_1f_trans_rmse_m"), one("rpe_1f_rot_rmse_deg")]);
             order.push(n.clone());
             rows.insert(n, ates);
         }
@@ -178,6 +194,7 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
         unit,
         keys,
         rows,
+        rpe,
         order,
     })
 }
@@ -195,6 +212,10 @@ struct Paired {
     better: usize,
     ate_rmse_m_variant: Vec<f64>,
     ate_rmse_m_reference: Vec<f64>,
+    /// The same geometric mean for the one-frame RPE, translation and rotation (null where a
+    /// run has none).
+    rpe_1f_trans_ratio_geomean: f64,
+    rpe_1f_rot_ratio_geomean: f64,
 }
 
 /// Pairs the rows of `var` with those of `reference` over `keys` (all the reference's when
@@ -279,6 +300,12 @@ fn compare(
         let va = pick(var, &var.rows[name]);
         let ra = pick(reference, ref_ates);
         let s = ratio_stats(&va, &ra);
+        let rpe_ratio = |c: usize| {
+            let (Some(v), Some(r)) = (var.rpe.get(name), reference.rpe.get(ref_name)) else {
+                return f64::NAN;
+            };
+            ratio_stats(&pick(var, &v[c]), &pick(reference, &r[c])).geomean
+        };
         out.push(Paired {
             variant_row: name.clone(),
             reference_row: ref_name.to_owned(),
@@ -288,6 +315,8 @@ fn compare(
             better: s.better,
             ate_rmse_m_variant: va,
             ate_rmse_m_reference: ra,
+            rpe_1f_trans_ratio_geomean: rpe_ratio(0),
+            rpe_1f_rot_ratio_geomean: rpe_ratio(1),
         });
     }
     if out.is_empty() {
@@ -319,18 +348,23 @@ fn table(reference: &Ablation, var: &Ablation, keys: &[usize], rows: &[Paired]) 
     );
     let _ = writeln!(
         s,
-        "{:<14}{:<14}{:>17}{:>7}{:>8}",
-        "variant", "reference", "ATE ratio", "worst", "better"
+        "{:<14}{:<14}{:>17}{:>7}{:>8}{:>24}",
+        "variant", "reference", "ATE ratio", "worst", "better", "RPE 1f ratio (t / rot)"
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "{:<14}{:<14}{:>17}{:>7.2}{:>8}",
+            "{:<14}{:<14}{:>17}{:>7.2}{:>8}{:>24}",
             r.variant_row,
             r.reference_row,
             ratio_cell(r.ate_ratio_geomean, r.ate_ratio_log_se),
             r.ate_ratio_worst,
-            format!("{}/{}", r.better, keys.len())
+            format!("{}/{}", r.better, keys.len()),
+            if r.rpe_1f_trans_ratio_geomean.is_finite() || r.rpe_1f_rot_ratio_geomean.is_finite() {
+                format!("{:.3} / {:.3}", r.rpe_1f_trans_ratio_geomean, r.rpe_1f_rot_ratio_geomean)
+            } else {
+                "n/a".to_owned()
+            }
         );
     }
     s
@@ -377,6 +411,10 @@ mod tests {
             unit: Unit::Starts,
             keys: keys.to_vec(),
             rows: rows.iter().map(|(n, a)| ((*n).to_owned(), a.to_vec())).collect(),
+            rpe: rows
+                .iter()
+                .map(|(n, a)| ((*n).to_owned(), [a.iter().map(|x| x / 10.0).collect(), a.to_vec()]))
+                .collect(),
             order: rows.iter().map(|(n, _)| (*n).to_owned()).collect(),
         }
     }
@@ -394,6 +432,9 @@ mod tests {
         assert_eq!(rows[0].ate_rmse_m_variant, [0.5, 2.0, 2.0]);
         // Ratios 0.5, 1, 0.5: geometric mean 0.5^(2/3), better from 2 (a tie is not better).
         assert!((rows[0].ate_ratio_geomean - 0.5f64.powf(2.0 / 3.0)).abs() < 1e-12);
+        // The RPE ratios pair the same starts (the helper's RPEs are the ATEs / 10 and as is).
+        assert!((rows[0].rpe_1f_trans_ratio_geomean - rows[0].ate_ratio_geomean).abs() < 1e-12);
+        assert!((rows[0].rpe_1f_rot_ratio_geomean - rows[0].ate_ratio_geomean).abs() < 1e-12);
         assert_eq!(rows[0].better, 2);
         assert_eq!(notes, ["motion/em: not in the reference, left out"]);
         let (_, rows, _) = compare(&r, &v, Some("off/em"), &[2]).unwrap();

@@ -486,6 +486,8 @@ fn ablate_first_frames_runs_every_row_from_each_start() {
     assert_eq!(row["ate_ratio_geomean"], em["ate_ratio_geomean"], "{c}");
     assert_eq!(row["ate_ratio_log_se"], em["ate_ratio_log_se"], "{c}");
     assert_eq!(row["better"], em["ate_better_starts"], "{c}");
+    assert_eq!(row["rpe_1f_trans_ratio_geomean"], em["rpe_1f_trans_ratio_geomean"], "{c}");
+    assert_eq!(row["rpe_1f_rot_ratio_geomean"], em["rpe_1f_rot_ratio_geomean"], "{c}");
     // One of the two starts: that start's ratio, no standard error.
     let o = semloc(&["compare", o_s, o_s, "--against", "off/hard", "--starts", "3", "--json", c_s]);
     assert!(o.status.success(), "{:?}", text(&o));
