@@ -804,7 +804,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         "feature_share": share,
         "first_frames": first_frames,
         "over_first_frames": over_starts,
-        "align": align_name(args.align),
+        "align": semloc::eval::Align::from(args.align).to_string(),
     });
     let p = args.out.join("ablation.json");
     std::fs::write(&p, serde_json::to_string_pretty(&json)?)
@@ -814,15 +814,6 @@ pub fn run(args: &AblateArgs) -> Result<()> {
 }
 
 /// The name of a row: its folder, `semantics-assoc`.
-/// `--align`'s value as the command line spells it (`ablation.json`'s `align`).
-fn align_name(a: AlignArg) -> &'static str {
-    match a {
-        AlignArg::Se3 => "se3",
-        AlignArg::Sim3 => "sim3",
-        AlignArg::None => "none",
-    }
-}
-
 pub fn row_name(r: &Row) -> String {
     format!("{}-{}", r.semantics.name(), association_name(r.assoc))
 }
