@@ -75,13 +75,19 @@ struct Ablation {
     unit: Unit,
     /// Start frames (`Starts`, `Single`) or seeds, in the order of each row's ATEs.
     keys: Vec<usize>,
-    /// `semantics/association` → ATE per key.
-    rows: BTreeMap<String, Vec<f64>>,
-    /// `semantics/association` → one-frame RPE (translation m, rotation deg) per key; NaN where
-    /// the file has none (runs paired by seed, or too few frames).
-    rpe: BTreeMap<String, [Vec<f64>; 2]>,
+    /// `semantics/association` → its figures.
+    rows: BTreeMap<String, RowRuns>,
     /// Row names in the file's order.
     order: Vec<String>,
+}
+
+/// One row's figures per key.
+#[derive(Debug)]
+struct RowRuns {
+    ate: Vec<f64>,
+    /// One-frame RPE, translation (m) and rotation (deg); NaN where the file has none (runs
+    /// paired by seed, or too few frames).
+    rpe: [Vec<f64>; 2],
 }
 
 /// `ablation.json` in `path`, or `path` itself when it is a file.
@@ -125,7 +131,6 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
         Ok(format!("{s}/{a}"))
     };
     let mut rows = BTreeMap::new();
-    let mut rpe = BTreeMap::new();
     let mut order = Vec::new();
     // RPE lists may hold null (a NaN written by serde_json): kept as NaN.
     let maybe_nums = |x: &serde_json::Value, n: usize| -> Vec<f64> {
@@ -145,10 +150,10 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
             if ates.len() != keys.len() {
                 bail!("{n} has {} ATEs for {} first frames", ates.len(), keys.len());
             }
-            let t = maybe_nums(&r["rpe_1f_trans_rmse_m"], keys.len());
-            rpe.insert(n.clone(), [t, maybe_nums(&r["rpe_1f_rot_rmse_deg"], keys.len())]);
+            let rpe = ["rpe_1f_trans_rmse_m", "rpe_1f_rot_rmse_deg"]
+                .map(|k| maybe_nums(&r[k], keys.len()));
             order.push(n.clone());
-            rows.insert(n, ates);
+            rows.insert(n, RowRuns { ate: ates, rpe });
         }
         (Unit::Starts, keys)
     } else {
@@ -167,13 +172,12 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
             if ates.is_empty() {
                 bail!("{n} has no ATE (the dataset has no ground truth, or the run failed)");
             }
-            let one = |k: &str| {
+            let rpe = ["rpe_1f_trans_rmse_m", "rpe_1f_rot_rmse_deg"].map(|k| {
                 let x = r[k].as_f64().filter(|_| seeds == 1).unwrap_or(f64::NAN);
                 vec![x; ates.len()]
-            };
-            rpe.insert(n.clone(), [one("rpe_1f_trans_rmse_m"), one("rpe_1f_rot_rmse_deg")]);
+            });
             order.push(n.clone());
-            rows.insert(n, ates);
+            rows.insert(n, RowRuns { ate: ates, rpe });
         }
         if seeds > 1 {
             (Unit::Seeds, (0..seeds).collect())
@@ -194,7 +198,6 @@ fn parse(file: &Path, v: &serde_json::Value) -> Result<Ablation> {
         unit,
         keys,
         rows,
-        rpe,
         order,
     })
 }
@@ -290,21 +293,19 @@ fn compare(
     let mut out = Vec::new();
     for name in &var.order {
         let ref_name = against.unwrap_or(name);
-        let Some(ref_ates) = reference.rows.get(ref_name) else {
+        let Some(ref_row) = reference.rows.get(ref_name) else {
             notes.push(format!("{name}: not in the reference, left out"));
             continue;
         };
         let pick = |a: &Ablation, ates: &[f64]| -> Vec<f64> {
             keys.iter().filter_map(|&k| index(a, k).map(|i| ates[i])).collect()
         };
-        let va = pick(var, &var.rows[name]);
-        let ra = pick(reference, ref_ates);
+        let var_row = &var.rows[name];
+        let va = pick(var, &var_row.ate);
+        let ra = pick(reference, &ref_row.ate);
         let s = ratio_stats(&va, &ra);
         let rpe_ratio = |c: usize| {
-            let (Some(v), Some(r)) = (var.rpe.get(name), reference.rpe.get(ref_name)) else {
-                return f64::NAN;
-            };
-            ratio_stats(&pick(var, &v[c]), &pick(reference, &r[c])).geomean
+            ratio_stats(&pick(var, &var_row.rpe[c]), &pick(reference, &ref_row.rpe[c])).geomean
         };
         out.push(Paired {
             variant_row: name.clone(),
@@ -410,10 +411,12 @@ mod tests {
             align: Some("sim3".into()),
             unit: Unit::Starts,
             keys: keys.to_vec(),
-            rows: rows.iter().map(|(n, a)| ((*n).to_owned(), a.to_vec())).collect(),
-            rpe: rows
+            rows: rows
                 .iter()
-                .map(|(n, a)| ((*n).to_owned(), [a.iter().map(|x| x / 10.0).collect(), a.to_vec()]))
+                .map(|(n, a)| {
+                    let rpe = [a.iter().map(|x| x / 10.0).collect(), a.to_vec()];
+                    ((*n).to_owned(), RowRuns { ate: a.to_vec(), rpe })
+                })
                 .collect(),
             order: rows.iter().map(|(n, _)| (*n).to_owned()).collect(),
         }
