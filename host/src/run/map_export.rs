@@ -43,6 +43,11 @@ pub struct MapPoint {
     pub first_frame: u32,
     /// Frame index at which it was last in the map.
     pub last_frame: u32,
+    /// Frames whose final matches (outliers of the pose solve dropped) included it: how long
+    /// it was tracked (ORB-SLAM2's `nFound`; a fused point adds its duplicate's).
+    pub found: u32,
+    /// Frames in which tracking predicted it in view (ORB-SLAM2's `nVisible`).
+    pub visible: u32,
 }
 
 /// Remembers every point of the map over a run (see the module docs).
@@ -72,6 +77,8 @@ impl MapCollector {
                     m.class = class;
                     m.observations = m.observations.max(lm.n_obs);
                     m.last_frame = frame;
+                    m.found = m.found.max(lm.found);
+                    m.visible = m.visible.max(lm.visible);
                 })
                 .or_insert(MapPoint {
                     p_w: p,
@@ -79,6 +86,8 @@ impl MapCollector {
                     observations: lm.n_obs,
                     first_frame: frame,
                     last_frame: frame,
+                    found: lm.found,
+                    visible: lm.visible,
                 });
         }
     }
@@ -106,7 +115,14 @@ impl MapCollector {
         for p in ["float x", "float y", "float z", "uchar red", "uchar green", "uchar blue"] {
             let _ = writeln!(s, "property {p}");
         }
-        for p in ["uchar class", "uchar observations", "uint first_frame", "uint last_frame"] {
+        for p in [
+            "uchar class",
+            "uchar observations",
+            "uint first_frame",
+            "uint last_frame",
+            "uint found",
+            "uint visible",
+        ] {
             let _ = writeln!(s, "property {p}");
         }
         s.push_str("end_header\n");
@@ -115,8 +131,16 @@ impl MapCollector {
                 CAMVID_PALETTE.get(usize::from(m.class)).copied().unwrap_or([160, 160, 160]);
             let _ = writeln!(
                 s,
-                "{:.4} {:.4} {:.4} {r} {g} {b} {} {} {} {}",
-                m.p_w[0], m.p_w[1], m.p_w[2], m.class, m.observations, m.first_frame, m.last_frame
+                "{:.4} {:.4} {:.4} {r} {g} {b} {} {} {} {} {} {}",
+                m.p_w[0],
+                m.p_w[1],
+                m.p_w[2],
+                m.class,
+                m.observations,
+                m.first_frame,
+                m.last_frame,
+                m.found,
+                m.visible
             );
         }
         s

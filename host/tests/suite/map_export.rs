@@ -4,11 +4,13 @@ use std::path::Path;
 
 use crate::common::{run_parked, s, text};
 
-/// A parsed PLY vertex: x, y, z (m), class, observations.
+/// A parsed PLY vertex: x, y, z (m), class, observations, frames found and visible.
 struct Vertex {
     p: [f64; 3],
     class: u8,
     obs: u8,
+    found: u32,
+    visible: u32,
 }
 
 /// Parses the PLY semloc writes, checking its header against its body.
@@ -23,7 +25,7 @@ fn read_ply(path: &Path) -> Vec<Vertex> {
         .parse()
         .unwrap();
     let props: Vec<&str> = header.lines().filter_map(|l| l.strip_prefix("property ")).collect();
-    assert_eq!(props.len(), 10, "{props:?}");
+    assert_eq!(props.len(), 12, "{props:?}");
     let lines: Vec<&str> = body.lines().collect();
     assert_eq!(lines.len(), n, "vertex count in the header");
     lines
@@ -36,6 +38,8 @@ fn read_ply(path: &Path) -> Vec<Vertex> {
                 p: [v(0), v(1), v(2)],
                 class: f[6].parse().unwrap(),
                 obs: f[7].parse().unwrap(),
+                found: f[10].parse().unwrap(),
+                visible: f[11].parse().unwrap(),
             }
         })
         .collect()
@@ -71,6 +75,17 @@ fn run_writes_the_map_with_classes() {
     assert!(classes.len() >= 3, "classes {classes:?}");
     // The road (3) is there.
     assert!(classes.contains(&3), "classes {classes:?}");
+    // Tracking counts over the 10 frames: every confirmed point was matched at least once (the
+    // keyframe that made it), most of them again, some in nearly every frame; a point is rarely
+    // found more often than predicted in view (only a fused point, which adds its duplicate's
+    // counts).
+    assert!(pts.iter().all(|v| v.found >= 1 && v.visible >= 1));
+    let mut found: Vec<u32> = pts.iter().map(|v| v.found).collect();
+    found.sort_unstable();
+    assert!(found[found.len() / 2] >= 2, "median found {}", found[found.len() / 2]);
+    assert!(found[found.len() - 1] >= 8, "most found {}", found[found.len() - 1]);
+    let over = pts.iter().filter(|v| v.found > v.visible).count();
+    assert!(over * 50 <= pts.len(), "{over} of {} found more than visible", pts.len());
 }
 
 #[test]
