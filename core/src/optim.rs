@@ -241,7 +241,8 @@ fn solve6(h: &SMatrix<f64, 6, 6>, g: &Vector6<f64>) -> Option<Vector6<f64>> {
 /// In-place Cholesky solve of the leading `n`x`n` block of a column-major `ld`x`ld` matrix.
 /// Overwrites `a` with the factor and `b` with the solution; false if not positive definite.
 /// Written out (rather than nalgebra's `Cholesky`) so the 60x60 BA system is factored where it
-/// lies, with no second copy on the stack.
+/// lies, with no second copy on the stack. Reads only the lower triangle (row ≥ column):
+/// `build_reduced` forms only that half.
 fn cholesky_solve_in_place(a: &mut [f64], ld: usize, n: usize, b: &mut [f64]) -> bool {
     let at = |r: usize, c: usize| c * ld + r;
     for j in 0..n {
@@ -634,7 +635,8 @@ fn build_reduced(
         if !(hll.determinant() > 1e-18) || !hll_inv.iter().all(|x| x.is_finite()) {
             continue;
         }
-        // S -= H_pl H_ll⁻¹ H_lp ; g -= H_pl H_ll⁻¹ b_l
+        // S -= H_pl H_ll⁻¹ H_lp ; g -= H_pl H_ll⁻¹ b_l. S is symmetric and the solver reads
+        // only its lower triangle, so only the blocks (a, b) with b ≤ a are formed.
         for ka in 0..n_seen {
             let a = idx[ka];
             let ha = hpl[ka].transpose() * hll_inv; // 6x3
@@ -643,7 +645,9 @@ fn build_reduced(
                 scratch.g[6 * a + i] -= ga[i];
             }
             for kb in 0..n_seen {
-                sub_block(&mut scratch.s, a, idx[kb], &(ha * hpl[kb]));
+                if idx[kb] <= a {
+                    sub_block(&mut scratch.s, a, idx[kb], &(ha * hpl[kb]));
+                }
             }
         }
     }
