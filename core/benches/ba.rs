@@ -1,7 +1,8 @@
 //! Local bundle adjustment (`optim::bundle_adjust`) on a KITTI-like window: 24 keyframes 1 m
 //! apart along a straight road, 3000 points 8–48 m ahead, each seen by a run of 4–16
-//! consecutive keyframes (the track lengths of the 01 clip), 5 Levenberg-Marquardt iterations
-//! (`tracker.ba_iterations`), from poses and points perturbed as tracking leaves them.
+//! consecutive keyframes (at most `MAX_OBS` = 16, as a landmark keeps), 5 Levenberg-Marquardt
+//! iterations (`tracker.ba_iterations`), from poses and points perturbed as tracking leaves
+//! them.
 //!
 //! Two rows in the same run: 15 keyframes optimised and 9 fixed (the default,
 //! `tracker.ba_keyframes = 15`) and 20 optimised and 4 fixed (`ba_keyframes = 20`); the second's
