@@ -235,6 +235,25 @@ pub fn point_pose_jacobian(p: &Vector3<f64>) -> Matrix3x6<f64> {
     j
 }
 
+/// `a * point_pose_jacobian(p)` without its multiplications by 0 and 1, the same sums in the
+/// same order (so the same bits, up to the sign of a zero). It is the inner step of every
+/// pose and bundle-adjustment linearisation.
+#[inline]
+pub fn times_point_pose_jacobian(a: &Matrix3<f64>, p: &Vector3<f64>) -> Matrix3x6<f64> {
+    let mut j = Matrix3x6::zeros();
+    for r in 0..3 {
+        let (a0, a1, a2) = (a[(r, 0)], a[(r, 1)], a[(r, 2)]);
+        j[(r, 0)] = a0;
+        j[(r, 1)] = a1;
+        j[(r, 2)] = a2;
+        // -skew(p) = [[0, z, -y], [-z, 0, x], [y, -x, 0]]
+        j[(r, 3)] = a1 * -p.z + a2 * p.y;
+        j[(r, 4)] = a0 * p.z + a2 * -p.x;
+        j[(r, 5)] = a0 * -p.y + a1 * p.x;
+    }
+    j
+}
+
 /// A rigid transform in SE(3): rotation matrix and translation (metres).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Se3 {

@@ -21,7 +21,7 @@
 
 use nalgebra::{Matrix3, Matrix3x6, SMatrix, SVector, Vector3, Vector6};
 
-use crate::geom::{point_pose_jacobian, Se3, StereoCamera};
+use crate::geom::{times_point_pose_jacobian, Se3, StereoCamera};
 use crate::math;
 
 /// Most keyframes a BA problem can hold (the sliding window's capacity).
@@ -187,7 +187,7 @@ pub fn optimize_pose(
                 let s = l.r.norm_squared() * o.z.inv_sigma2;
                 let rw = if robust { huber(s, o.z.chi2_threshold()).1 } else { 1.0 };
                 let w = o.weight * o.z.inv_sigma2 * rw;
-                let j = l.j_pc * point_pose_jacobian(&pc);
+                let j = times_point_pose_jacobian(&l.j_pc, &pc);
                 h += j.transpose() * j * w;
                 g += j.transpose() * l.r * w;
                 used += 1;
@@ -525,7 +525,7 @@ fn obs_terms(
     let s = l.r.norm_squared() * o.z.inv_sigma2;
     let rw = if params.robust { huber(s, o.z.chi2_threshold()).1 } else { 1.0 };
     let w = o.weight * o.z.inv_sigma2 * rw;
-    Some((l.j_pc * point_pose_jacobian(&pc), l.j_pc * pose.rot, l.r, w))
+    Some((times_point_pose_jacobian(&l.j_pc, &pc), l.j_pc * pose.rot, l.r, w))
 }
 
 /// The groups of observations sharing a point, as `(point, start, end)`.
@@ -547,6 +547,8 @@ fn groups(obs: &[BaObs]) -> impl Iterator<Item = (u32, usize, usize)> + '_ {
 }
 
 /// The damped point block `H_ll` and gradient `b_l` of one point; `None` if not invertible.
+/// `terms[i]`, where `terms` is long enough, receives observation `i`'s linear terms (`None`
+/// where it is unusable) for the caller to reuse: linearising is most of the work.
 fn point_block(
     cam: &StereoCamera,
     poses: &[Se3],
@@ -554,11 +556,16 @@ fn point_block(
     group: &[BaObs],
     params: &BaParams,
     lambda: f64,
+    terms: &mut [Option<ObsTerms>],
 ) -> Option<(Matrix3<f64>, Vector3<f64>)> {
     let mut hll = Matrix3::zeros();
     let mut bl = Vector3::zeros();
-    for o in group {
-        if let Some((_, jl, r, w)) = obs_terms(cam, &poses[usize::from(o.kf)], p_w, o, params) {
+    for (i, o) in group.iter().enumerate() {
+        let t = obs_terms(cam, &poses[usize::from(o.kf)], p_w, o, params);
+        if let Some(slot) = terms.get_mut(i) {
+            *slot = t;
+        }
+        if let Some((_, jl, r, w)) = t {
             hll += jl.transpose() * jl * w;
             bl += jl.transpose() * r * w;
         }
@@ -690,19 +697,29 @@ fn back_substitute(
     lambda: f64,
 ) {
     let poses = old_poses;
+    // Each group's linear terms, written by `point_block` for its first `MAX_WINDOW`
+    // observations. A point has at most one observation per pose, so a group fits; a longer
+    // one (a caller's) has the rest linearised again below.
+    let mut terms = [None; MAX_WINDOW];
     for (p, start, end) in groups(obs) {
         let group = &obs[start..end];
         let p_w = points[p as usize];
-        let Some((hll_inv, mut rhs)) = point_block(cam, poses, &p_w, group, params, lambda) else {
+        let Some((hll_inv, mut rhs)) =
+            point_block(cam, poses, &p_w, group, params, lambda, &mut terms)
+        else {
             continue;
         };
-        for o in group {
+        for (i, o) in group.iter().enumerate() {
             let Some(a) = usize::from(o.kf).checked_sub(fixed) else { continue };
             if a >= MAX_WINDOW {
                 continue;
             }
-            let Some((jp, jl, _, w)) = obs_terms(cam, &poses[usize::from(o.kf)], &p_w, o, params)
-            else {
+            let t = if i < MAX_WINDOW {
+                terms[i]
+            } else {
+                obs_terms(cam, &poses[usize::from(o.kf)], &p_w, o, params)
+            };
+            let Some((jp, jl, _, w)) = t else {
                 continue;
             };
             let d = Vector6::from_column_slice(&scratch.g.as_slice()[6 * a..6 * a + 6]);

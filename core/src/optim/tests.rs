@@ -163,3 +163,55 @@ fn bundle_adjustment_rejects_malformed_problems() {
         Err(BaError::TooManyPoses { got: MAX_WINDOW + 1 })
     );
 }
+
+/// Back-substitution reuses each observation's linearisation when a point's observations fit
+/// the window, and linearises the rest again when a caller gives more (one pose's measurement
+/// repeated): both paths must solve the problem the single observations pose.
+#[test]
+fn repeated_observations_solve_like_single_ones() {
+    let cam = kitti_cam();
+    let solve = |repeat: usize| {
+        let mut rng = Rng::new(0x0bad_5eed_0000_0042);
+        let truth: Vec<Se3> = (0..5)
+            .map(|k| Se3::new(Matrix3::identity(), Vector3::new(0.0, 0.0, -(k as f64))))
+            .collect();
+        let pts_true = world_points(&mut rng, 100);
+        let mut obs = Vec::new();
+        for (i, p) in pts_true.iter().enumerate() {
+            for (k, t) in truth.iter().enumerate() {
+                let z = measure(&cam, t, p);
+                for _ in 0..repeat {
+                    let weight = 1.0 / repeat as f64;
+                    obs.push(BaObs { kf: k as u8, point: i as u32, z, weight });
+                }
+            }
+        }
+        let mut poses = truth.clone();
+        for p in poses.iter_mut().skip(1) {
+            *p = p.retract(&(Vector6::new(1.0, -0.5, 0.3, 2e-3, -1e-3, 4e-3) * rng.signed()));
+        }
+        let mut pts: Vec<Vector3<f64>> =
+            pts_true.iter().map(|p| p + Vector3::new(0.05, -0.03, 0.2) * rng.signed()).collect();
+        let mut backup = vec![Vector3::zeros(); pts.len()];
+        let mut scratch = Box::new(BaScratch::new());
+        let params = BaParams { iterations: 3, robust: true };
+        let rep =
+            bundle_adjust(&cam, &mut poses, 1, &mut pts, &obs, &mut backup, &mut scratch, &params)
+                .unwrap();
+        assert!(rep.final_cost < rep.initial_cost, "{rep:?}");
+        (poses, pts)
+    };
+    // 1: groups of 5; 4: 20, within the window; 6: 30, past it.
+    let (p1, l1) = solve(1);
+    for repeat in [4, 6] {
+        let (p, l) = solve(repeat);
+        for (a, b) in p1.iter().zip(&p) {
+            // Matrix entries, not `pose_err`'s angle: acos resolves nothing under ~2e-8 rad.
+            let (dt, dr) = ((a.trans - b.trans).norm(), (a.rot - b.rot).norm());
+            assert!(dt < 1e-9 && dr < 1e-11, "x{repeat}: dt {dt} dr {dr}");
+        }
+        for (a, b) in l1.iter().zip(&l) {
+            assert!((a - b).norm() < 1e-8, "x{repeat}: {a} {b}");
+        }
+    }
+}
