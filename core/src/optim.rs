@@ -19,7 +19,7 @@
 // are rejected by the same test that rejects non-positive ones.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use nalgebra::{Matrix3, Matrix3x6, SMatrix, SVector, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix3x6, Matrix6x3, SMatrix, SVector, Vector3, Vector6};
 
 use crate::geom::{times_point_pose_jacobian, Se3, StereoCamera};
 use crate::math;
@@ -618,7 +618,7 @@ fn build_reduced(
             bl += jlt_w * r;
             let Some(a) = free(o.kf) else { continue };
             let jpt_w = jp.transpose() * w;
-            add_block(&mut scratch.s, a, a, &(jpt_w * jp));
+            add_product_block(&mut scratch.s, a, a, &jpt_w, &jp);
             let gp = jpt_w * r;
             for i in 0..6 {
                 scratch.g[6 * a + i] += gp[i];
@@ -653,7 +653,7 @@ fn build_reduced(
             }
             for kb in 0..n_seen {
                 if idx[kb] <= a {
-                    sub_block(&mut scratch.s, a, idx[kb], &(ha * hpl[kb]));
+                    sub_product_block(&mut scratch.s, a, idx[kb], &ha, &hpl[kb]);
                 }
             }
         }
@@ -664,21 +664,43 @@ fn build_reduced(
     }
 }
 
-/// `S[a, b] -= m` for one 6×6 block (plain loops: nalgebra's negation iterates slowly).
+/// `S[a, b] -= ha * h` for one 6×6 block, without forming the product: the Schur complement's
+/// inner step, once per pair of poses that see a point. Each entry is summed in the order
+/// nalgebra's product sums it (`((ha₀h₀ + ha₁h₁) + ha₂h₂)`), so the result is the same bits.
 #[inline]
-fn sub_block(s: &mut SMatrix<f64, NP, NP>, a: usize, b: usize, m: &SMatrix<f64, 6, 6>) {
+fn sub_product_block(
+    s: &mut SMatrix<f64, NP, NP>,
+    a: usize,
+    b: usize,
+    ha: &Matrix6x3<f64>,
+    h: &Matrix3x6<f64>,
+) {
+    let data = s.as_mut_slice();
     for c in 0..6 {
-        for r in 0..6 {
-            s[(6 * a + r, 6 * b + c)] -= m[(r, c)];
+        let (h0, h1, h2) = (h[(0, c)], h[(1, c)], h[(2, c)]);
+        // Column-major: column 6b + c, rows 6a..6a + 6.
+        let col = &mut data[(6 * b + c) * NP + 6 * a..][..6];
+        for (r, x) in col.iter_mut().enumerate() {
+            *x -= ha[(r, 0)] * h0 + ha[(r, 1)] * h1 + ha[(r, 2)] * h2;
         }
     }
 }
 
+/// `S[a, b] += ha * h`, as [`sub_product_block`] subtracts it.
 #[inline]
-fn add_block(s: &mut SMatrix<f64, NP, NP>, a: usize, b: usize, m: &SMatrix<f64, 6, 6>) {
+fn add_product_block(
+    s: &mut SMatrix<f64, NP, NP>,
+    a: usize,
+    b: usize,
+    ha: &Matrix6x3<f64>,
+    h: &Matrix3x6<f64>,
+) {
+    let data = s.as_mut_slice();
     for c in 0..6 {
-        for r in 0..6 {
-            s[(6 * a + r, 6 * b + c)] += m[(r, c)];
+        let (h0, h1, h2) = (h[(0, c)], h[(1, c)], h[(2, c)]);
+        let col = &mut data[(6 * b + c) * NP + 6 * a..][..6];
+        for (r, x) in col.iter_mut().enumerate() {
+            *x += ha[(r, 0)] * h0 + ha[(r, 1)] * h1 + ha[(r, 2)] * h2;
         }
     }
 }
