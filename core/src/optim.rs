@@ -618,7 +618,7 @@ fn build_reduced(
             bl += jlt_w * r;
             let Some(a) = free(o.kf) else { continue };
             let jpt_w = jp.transpose() * w;
-            add_product_block(&mut scratch.s, a, a, &jpt_w, &jp);
+            product_block::<false>(&mut scratch.s, a, a, &jpt_w, &jp);
             let gp = jpt_w * r;
             for i in 0..6 {
                 scratch.g[6 * a + i] += gp[i];
@@ -653,7 +653,7 @@ fn build_reduced(
             }
             for kb in 0..n_seen {
                 if idx[kb] <= a {
-                    sub_product_block(&mut scratch.s, a, idx[kb], &ha, &hpl[kb]);
+                    product_block::<true>(&mut scratch.s, a, idx[kb], &ha, &hpl[kb]);
                 }
             }
         }
@@ -664,11 +664,12 @@ fn build_reduced(
     }
 }
 
-/// `S[a, b] -= ha * h` for one 6×6 block, without forming the product: the Schur complement's
-/// inner step, once per pair of poses that see a point. Each entry is summed in the order
-/// nalgebra's product sums it (`((ha₀h₀ + ha₁h₁) + ha₂h₂)`), so the result is the same bits.
+/// `S[a, b] -= ha * h` (`SUB`) or `+=` for one 6×6 block, without forming the product: the
+/// Schur complement's inner step, once per pair of poses that see a point. Each entry is summed
+/// in the order nalgebra's product sums it (`((ha₀h₀ + ha₁h₁) + ha₂h₂)`), so the result is the
+/// same bits.
 #[inline]
-fn sub_product_block(
+fn product_block<const SUB: bool>(
     s: &mut SMatrix<f64, NP, NP>,
     a: usize,
     b: usize,
@@ -681,26 +682,12 @@ fn sub_product_block(
         // Column-major: column 6b + c, rows 6a..6a + 6.
         let col = &mut data[(6 * b + c) * NP + 6 * a..][..6];
         for (r, x) in col.iter_mut().enumerate() {
-            *x -= ha[(r, 0)] * h0 + ha[(r, 1)] * h1 + ha[(r, 2)] * h2;
-        }
-    }
-}
-
-/// `S[a, b] += ha * h`, as [`sub_product_block`] subtracts it.
-#[inline]
-fn add_product_block(
-    s: &mut SMatrix<f64, NP, NP>,
-    a: usize,
-    b: usize,
-    ha: &Matrix6x3<f64>,
-    h: &Matrix3x6<f64>,
-) {
-    let data = s.as_mut_slice();
-    for c in 0..6 {
-        let (h0, h1, h2) = (h[(0, c)], h[(1, c)], h[(2, c)]);
-        let col = &mut data[(6 * b + c) * NP + 6 * a..][..6];
-        for (r, x) in col.iter_mut().enumerate() {
-            *x += ha[(r, 0)] * h0 + ha[(r, 1)] * h1 + ha[(r, 2)] * h2;
+            let m = ha[(r, 0)] * h0 + ha[(r, 1)] * h1 + ha[(r, 2)] * h2;
+            if SUB {
+                *x -= m;
+            } else {
+                *x += m;
+            }
         }
     }
 }

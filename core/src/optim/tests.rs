@@ -16,6 +16,30 @@ fn measure(cam: &StereoCamera, t_cw: &Se3, p: &Vector3<f64>) -> Measurement {
     Measurement { u, v, ur: u - cam.fx_px * cam.baseline_m / pc.z, inv_sigma2: 1.0 }
 }
 
+/// Five keyframes driving forward 1 m each, and `n` points ahead of them; every keyframe
+/// measures every point `repeat` times, each with weight `1 / repeat`.
+fn forward_window(
+    rng: &mut Rng,
+    cam: &StereoCamera,
+    n: usize,
+    repeat: usize,
+) -> (Vec<Se3>, Vec<Vector3<f64>>, Vec<BaObs>) {
+    let truth: Vec<Se3> = (0..5)
+        .map(|k| Se3::new(Matrix3::identity(), Vector3::new(0.0, 0.0, -(k as f64))))
+        .collect();
+    let pts_true = world_points(rng, n);
+    let mut obs = Vec::new();
+    for (i, p) in pts_true.iter().enumerate() {
+        for (k, t) in truth.iter().enumerate() {
+            let z = measure(cam, t, p);
+            for _ in 0..repeat {
+                obs.push(BaObs { kf: k as u8, point: i as u32, z, weight: 1.0 / repeat as f64 });
+            }
+        }
+    }
+    (truth, pts_true, obs)
+}
+
 fn pose(rng: &mut Rng, rot: f64, trans: f64) -> Se3 {
     let d = Vector6::new(
         rng.signed() * trans,
@@ -95,17 +119,7 @@ fn zero_weight_observations_do_not_count() {
 fn bundle_adjustment_converges_from_perturbed_window() {
     let mut rng = Rng::new(0x1234_5678_9abc_def1);
     let cam = kitti_cam();
-    // Five keyframes driving forward 1 m each.
-    let truth: Vec<Se3> = (0..5)
-        .map(|k| Se3::new(Matrix3::identity(), Vector3::new(0.0, 0.0, -(k as f64))))
-        .collect();
-    let pts_true = world_points(&mut rng, 200);
-    let mut obs = Vec::new();
-    for (i, p) in pts_true.iter().enumerate() {
-        for (k, t) in truth.iter().enumerate() {
-            obs.push(BaObs { kf: k as u8, point: i as u32, z: measure(&cam, t, p), weight: 1.0 });
-        }
-    }
+    let (truth, pts_true, obs) = forward_window(&mut rng, &cam, 200, 1);
     let mut poses = truth.clone();
     for p in poses.iter_mut().skip(1) {
         *p = p.retract(&Vector6::new(
@@ -172,20 +186,7 @@ fn repeated_observations_solve_like_single_ones() {
     let cam = kitti_cam();
     let solve = |repeat: usize| {
         let mut rng = Rng::new(0x0bad_5eed_0000_0042);
-        let truth: Vec<Se3> = (0..5)
-            .map(|k| Se3::new(Matrix3::identity(), Vector3::new(0.0, 0.0, -(k as f64))))
-            .collect();
-        let pts_true = world_points(&mut rng, 100);
-        let mut obs = Vec::new();
-        for (i, p) in pts_true.iter().enumerate() {
-            for (k, t) in truth.iter().enumerate() {
-                let z = measure(&cam, t, p);
-                for _ in 0..repeat {
-                    let weight = 1.0 / repeat as f64;
-                    obs.push(BaObs { kf: k as u8, point: i as u32, z, weight });
-                }
-            }
-        }
+        let (truth, pts_true, obs) = forward_window(&mut rng, &cam, 100, repeat);
         let mut poses = truth.clone();
         for p in poses.iter_mut().skip(1) {
             *p = p.retract(&(Vector6::new(1.0, -0.5, 0.3, 2e-3, -1e-3, 4e-3) * rng.signed()));
