@@ -32,7 +32,8 @@
 use core::fmt;
 
 use nalgebra::{
-    Matrix2x3, Matrix2x6, Matrix3, Matrix3x4, Matrix3x6, Matrix6, Vector2, Vector3, Vector6,
+    Matrix2x3, Matrix2x6, Matrix3, Matrix3x4, Matrix3x6, Matrix6, SMatrix, Vector2, Vector3,
+    Vector6,
 };
 
 use crate::math;
@@ -235,13 +236,16 @@ pub fn point_pose_jacobian(p: &Vector3<f64>) -> Matrix3x6<f64> {
     j
 }
 
-/// `a * point_pose_jacobian(p)` without its multiplications by 0 and 1, the same sums in the
-/// same order (so the same bits, up to the sign of a zero). It is the inner step of every
-/// pose and bundle-adjustment linearisation.
+/// `a * point_pose_jacobian(p)` for an `R`x3 `a` (a projection Jacobian, mono or stereo),
+/// without its multiplications by 0 and 1: the same sums in the same order, so the same bits
+/// up to the sign of a zero. It is the inner step of every pose linearisation.
 #[inline]
-pub fn times_point_pose_jacobian(a: &Matrix3<f64>, p: &Vector3<f64>) -> Matrix3x6<f64> {
-    let mut j = Matrix3x6::zeros();
-    for r in 0..3 {
+pub fn times_point_pose_jacobian<const R: usize>(
+    a: &SMatrix<f64, R, 3>,
+    p: &Vector3<f64>,
+) -> SMatrix<f64, R, 6> {
+    let mut j = SMatrix::<f64, R, 6>::zeros();
+    for r in 0..R {
         let (a0, a1, a2) = (a[(r, 0)], a[(r, 1)], a[(r, 2)]);
         j[(r, 0)] = a0;
         j[(r, 1)] = a1;
@@ -555,7 +559,7 @@ impl StereoCamera {
         Some(MonoProjection {
             uv,
             p_cam,
-            d_pose: j * point_pose_jacobian(&p_cam),
+            d_pose: times_point_pose_jacobian(&j, &p_cam),
             d_point: j * t_cw.rot,
         })
     }
@@ -573,7 +577,7 @@ impl StereoCamera {
         Some(StereoProjection {
             uvr,
             p_cam,
-            d_pose: j * point_pose_jacobian(&p_cam),
+            d_pose: times_point_pose_jacobian(&j, &p_cam),
             d_point: j * t_cw.rot,
         })
     }

@@ -280,14 +280,17 @@ proptest! {
     fn times_point_pose_jacobian_is_the_product(
         a in prop::array::uniform9(-1e3f64..1e3), p in vec3(50.0), zero in 0usize..9,
     ) {
-        // Every entry, and with one entry of `a` zero (a mono Jacobian's third row, the
-        // projection Jacobian's zeros): the same values as the product, bit for bit.
+        // Every entry, and with one entry of `a` zero (the projection Jacobian's zeros): the
+        // same values as the product, bit for bit.
         for z in [None, Some(zero)] {
             let mut m = Matrix3::from_row_slice(&a);
             if let Some(k) = z {
                 m[(k / 3, k % 3)] = 0.0;
             }
             prop_assert_eq!(times_point_pose_jacobian(&m, &p), m * point_pose_jacobian(&p));
+            // Two rows, as a mono projection Jacobian has.
+            let m2 = m.fixed_rows::<2>(0).into_owned();
+            prop_assert_eq!(times_point_pose_jacobian(&m2, &p), m2 * point_pose_jacobian(&p));
         }
     }
 
