@@ -436,6 +436,28 @@ impl Localiser {
         self.tracker.process(&self.frame)
     }
 
+    /// After [`Self::match_stereo`]: the tracking stage and the two extraction stages borrowed
+    /// apart, so a host can extract the next frame while this one is tracked. The frame the
+    /// stereo matcher built is all that tracking reads; the extractors and the labels are free
+    /// once it is built, and the next frame's features and labels replace this one's there,
+    /// never in the frame. The poses are the same bits as extracting after
+    /// [`Self::track`] (read [`Self::culled`] before: it counts the extractor's last run).
+    pub fn split_for_tracking(
+        &mut self,
+    ) -> (TrackingStage<'_>, LeftExtraction<'_>, RightExtraction<'_>) {
+        let size = (self.width, self.height);
+        (
+            TrackingStage { tracker: &mut self.tracker, frame: &self.frame },
+            LeftExtraction {
+                ex: &mut self.left,
+                sem: &mut self.sem,
+                scheme: self.config.semantics,
+                size,
+            },
+            RightExtraction { ex: &mut self.right, size },
+        )
+    }
+
     /// One whole frame on this thread: extraction, stereo matching, tracking. Labels for the
     /// frame, when semantics are on, are set before ([`Self::set_labels`] or
     /// [`Self::label_with`]).
@@ -531,6 +553,20 @@ impl Localiser {
     /// The left extractor (its last features and statistics).
     pub fn left_extractor(&self) -> &FrameOrbExtractor {
         &self.left
+    }
+}
+
+/// The tracking stage, borrowed from a [`Localiser`] apart from its extractors
+/// ([`Localiser::split_for_tracking`]).
+pub struct TrackingStage<'a> {
+    tracker: &'a mut Tracker,
+    frame: &'a Frame,
+}
+
+impl TrackingStage<'_> {
+    /// As [`Localiser::track`].
+    pub fn track(&mut self) -> FrameReport {
+        self.tracker.process(self.frame)
     }
 }
 

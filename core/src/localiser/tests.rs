@@ -83,6 +83,54 @@ fn split_extraction_equals_one_thread() {
     });
 }
 
+/// The next frame extracted beside this one's tracking (a host's overlapped schedule) gives
+/// the same stereo matches, poses and culled counts as extracting it after.
+#[test]
+fn next_frame_extracted_while_tracking_equals_in_turn() {
+    on_big_stack(|| {
+        let frames: Vec<_> = (0..5).map(pair).collect();
+        // Labels that change per frame, so a frame tracked with the next one's labels would
+        // show: the "car" block moves.
+        let labs: Vec<Vec<u8>> = (0..5)
+            .map(|k| {
+                (0..W * H)
+                    .map(|i| if (90 + 8 * k..190 + 8 * k).contains(&(i % W)) { 8 } else { 1 })
+                    .collect()
+            })
+            .collect();
+        fn view(v: &[u8]) -> ImageView<'_> {
+            ImageView::from_slice(v, W, H).unwrap()
+        }
+        let mut a = localiser(Some(WeightScheme::Full));
+        let mut in_turn = Vec::new();
+        for (k, (l, r)) in frames.iter().enumerate() {
+            a.set_labels(&view(&labs[k])).unwrap();
+            let o = a.process(&view(l), &view(r), k as f64 * 0.1).unwrap();
+            in_turn.push((o.stereo, o.report.t_wc, o.report.inliers, o.culled));
+        }
+        let mut b = localiser(Some(WeightScheme::Full));
+        b.set_labels(&view(&labs[0])).unwrap();
+        b.extract(&view(&frames[0].0), &view(&frames[0].1)).unwrap();
+        for k in 0..frames.len() {
+            let stereo = b.match_stereo(k as f64 * 0.1).unwrap();
+            let culled = b.culled();
+            let (mut tracking, mut le, mut re) = b.split_for_tracking();
+            let rep = std::thread::scope(|s| {
+                let h = s.spawn(|| tracking.track());
+                if let Some((l, r)) = frames.get(k + 1) {
+                    le.set_labels(&view(&labs[k + 1])).unwrap();
+                    le.run(&view(l)).unwrap();
+                    re.run(&view(r)).unwrap();
+                }
+                h.join().unwrap()
+            });
+            assert_eq!((stereo, rep.t_wc, rep.inliers, culled), in_turn[k], "frame {k}");
+        }
+        assert!(in_turn.iter().all(|f| f.3 > 0), "the car block must cull candidates");
+        assert!(in_turn.iter().skip(1).all(|f| f.2 > 0), "frames must be tracked");
+    });
+}
+
 #[test]
 fn wrong_sizes_and_missing_labels_are_typed_errors() {
     on_big_stack(|| {
