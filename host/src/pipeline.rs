@@ -1,6 +1,7 @@
 //! The host's schedule of core's one frame path ([`Localiser`]): frames are loaded (PNG
-//! decoding), labelled by the int8 network one frame ahead, and the two ORB extractions run on
-//! two threads; the pipeline itself is core's, so the poses are the same bits as on the ECU.
+//! decoding), and with two threads the next frame is labelled by the int8 network and its ORB
+//! features extracted while this one is tracked ([`Schedule`]); the pipeline itself is core's,
+//! so the poses are the same bits as on the ECU, with any schedule.
 //!
 //! All working memory is core's fixed-size [`Localiser`] (≈ 11 MiB, see
 //! [`Pipeline::memory_bytes`]), created once; it is far larger than a default thread stack, so
@@ -8,6 +9,7 @@
 //! After that, processing a frame allocates nothing in core; the host's only per-frame
 //! allocations are image decoding, the network's label image and the scoped worker threads.
 
+use std::sync::Mutex;
 use std::time::Instant;
 
 use image::GrayImage;
@@ -269,18 +271,41 @@ impl CategoryCounts {
     }
 }
 
+/// How a two-thread [`Pipeline`] uses its second thread. Both give the same bits (and the
+/// same as one thread); only the time differs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Schedule {
+    /// While frame `i` is tracked, the second thread labels frame `i + 1` and extracts its left
+    /// ORB features; its right features go to whichever thread is free first. A frame then
+    /// costs about max(stereo + tracking, labelling + extraction) instead of their sum.
+    #[default]
+    Overlapped,
+    /// Stage by stage: the two extractions side by side, then stereo matching and tracking
+    /// beside the next frame's labelling (the schedule before 2026-12-03; `semloc bench`'s
+    /// reference).
+    Stagewise,
+}
+
 /// Core's frame path for one stereo sequence, with the host's loading, labelling and thread
 /// schedule around it.
 pub struct Pipeline {
     loc: Box<Localiser>,
-    /// Worker threads: 1 runs everything on the caller's thread, 2 extracts left and right
-    /// in parallel and labels the next frame while this one is tracked (the deployment
-    /// setting: the machine has two cores).
+    /// Worker threads: 1 runs everything on the caller's thread, 2 runs the [`Schedule`] (the
+    /// deployment setting: the machine has two cores).
     threads: usize,
+    schedule: Schedule,
+    /// Frames from this index on are not worked on ahead (the caller stops before them).
+    end: Option<usize>,
     /// The network that labels left frames when semantics are on (else the dataset's labels).
     segmenter: Option<Segmenter>,
-    /// The next frame's left image and labels, made while this frame was tracked.
+    /// The next frame's left image and labels, made while this frame was tracked (stagewise).
     prefetched: Option<Prefetch>,
+    /// The next frame's features, already in the localiser's extractors (overlapped).
+    extracted: Option<Extracted>,
+    /// The last processed frame's left image and labels (the extractors may hold the next
+    /// frame's by then).
+    current: Option<(GrayImage, Option<GrayImage>)>,
 }
 
 /// A frame segmented ahead of its turn.
@@ -290,6 +315,41 @@ struct Prefetch {
     labels: GrayImage,
     seg_ms: f64,
     load_ms: f64,
+}
+
+/// A frame extracted ahead of its turn: the localiser's extractors and labels hold its
+/// features; its images and stage times are kept for its own frame's output.
+struct Extracted {
+    index: usize,
+    left: GrayImage,
+    labels: Option<GrayImage>,
+    orb_left_ms: f64,
+    orb_right_ms: f64,
+    seg_ms: f64,
+}
+
+/// Frame `i` in the extractors: its images and what putting it there cost.
+struct InExtractors {
+    left: GrayImage,
+    labels: Option<GrayImage>,
+    orb_left_ms: f64,
+    orb_right_ms: f64,
+    seg_ms: f64,
+    /// Decoding on the critical path of the extraction step.
+    load_ms: f64,
+}
+
+/// The next frame's work on the second thread of the overlapped schedule.
+struct NextLeft {
+    left: GrayImage,
+    labels: Option<GrayImage>,
+    seg_ms: f64,
+    orb_left_ms: f64,
+    load_ms: f64,
+    /// The right extraction, when this thread took it: (load, ORB) ms.
+    right: Option<Result<(f64, f64), PipelineError>>,
+    /// Since the frame started.
+    end_ms: f64,
 }
 
 /// Stack for threads that construct or run core's large fixed-size state.
@@ -341,7 +401,16 @@ impl Pipeline {
             .join()
             .map_err(|_| PipelineError::Worker("constructor thread panicked".into()))?
             .map_err(PipelineError::Config)?;
-        Ok(Self { loc, threads: threads.clamp(1, 2), segmenter: None, prefetched: None })
+        Ok(Self {
+            loc,
+            threads: threads.clamp(1, 2),
+            schedule: Schedule::default(),
+            end: None,
+            segmenter: None,
+            prefetched: None,
+            extracted: None,
+            current: None,
+        })
     }
 
     /// Bytes of core state this pipeline holds (the whole [`Localiser`]).
@@ -355,13 +424,42 @@ impl Pipeline {
     pub fn set_semantics(&mut self, scheme: Option<WeightScheme>) {
         // Labels are checked when set, so rebuilding their weights cannot fail.
         let _ = self.loc.set_semantics(scheme);
+        self.forget_ahead();
+    }
+
+    /// How the second thread is used (two threads only; the results are the same bits).
+    pub fn set_schedule(&mut self, schedule: Schedule) {
+        self.schedule = schedule;
+        self.forget_ahead();
+    }
+
+    /// Frames from `end` on will not be processed: no work is done ahead for them.
+    pub fn set_end(&mut self, end: Option<usize>) {
+        self.end = end;
+    }
+
+    /// Drops work done ahead for the next frame (its settings changed, or the extractors were
+    /// used for something else); that frame is then made in turn.
+    fn forget_ahead(&mut self) {
+        self.prefetched = None;
+        self.extracted = None;
+    }
+
+    /// The last processed frame's left image.
+    pub fn left_image(&self) -> Option<&GrayImage> {
+        self.current.as_ref().map(|c| &c.0)
+    }
+
+    /// The last processed frame's labels (network or dataset), when semantics are on.
+    pub fn labels(&self) -> Option<&GrayImage> {
+        self.current.as_ref().and_then(|c| c.1.as_ref())
     }
 
     /// Labels left frames with the int8 network (pipelined on the second thread). The
     /// network's input must take this pipeline's frames (see [`Segmenter::letterbox`]).
     pub fn set_segmenter(&mut self, segmenter: Segmenter) {
         self.segmenter = Some(segmenter);
-        self.prefetched = None;
+        self.forget_ahead();
         self.loc.set_network_labels(true);
     }
 
@@ -409,11 +507,11 @@ impl Pipeline {
         self.process_frame(&pair, index)
     }
 
-    /// Processes frame `i` of `src`. With two threads the second one extracts the right
-    /// image's ORB and then, while this thread matches and tracks frame `i`, decodes and
-    /// segments frame `i + 1` (when a network labels the frames), so a frame costs
-    /// max(segmentation, tracking) rather than their sum. One thread does the same steps in
-    /// sequence; the results are identical.
+    /// Processes frame `i` of `src`. With two threads the [`Schedule`] says what the second
+    /// one does: by default it labels and extracts frame `i + 1` while this thread matches and
+    /// tracks frame `i`. One thread does the same steps in sequence; the results are identical.
+    /// Work done ahead for frame `i + 1` that fails is dropped, and frame `i + 1` is made in
+    /// turn, so its error is reported as its own.
     pub fn process_frame(
         &mut self,
         src: &(impl FrameSource + ?Sized),
@@ -421,36 +519,132 @@ impl Pipeline {
     ) -> Result<FrameOutput, PipelineError> {
         let t0 = Instant::now();
         let ts = src.timestamp_s(i);
+        let core_err = |err| PipelineError::Frame { frame: i, err };
+        // Frame i's features: extracted while the previous frame was tracked, or now.
+        let ahead = self.extracted.take().filter(|x| x.index == i);
+        self.prefetched = self.prefetched.take().filter(|p| p.index == i);
+        let this = match ahead {
+            Some(x) => InExtractors {
+                left: x.left,
+                labels: x.labels,
+                orb_left_ms: x.orb_left_ms,
+                orb_right_ms: x.orb_right_ms,
+                seg_ms: x.seg_ms,
+                load_ms: 0.0,
+            },
+            None => self.extract_in_turn(src, i)?,
+        };
+        let extract_wall_ms = ms(t0);
+        let limit = self.end.map_or(src.len(), |e| e.min(src.len()));
+        let next = (i + 1 < limit).then_some(i + 1);
         let scheme = self.loc.config().semantics;
         let use_net = scheme.is_some() && self.segmenter.is_some();
-        // Frame i's left image and labels: prefetched by the previous frame, or made now.
-        let prefetched = self.prefetched.take().filter(|p| p.index == i);
+
+        let Pipeline { loc, segmenter, threads, schedule, .. } = self;
+        let two = *threads >= 2;
+        let (stereo, stereo_ms, report, track_ms, culled, compute_ms);
+        match (two, *schedule, next) {
+            (true, Schedule::Overlapped, Some(j)) => {
+                let out = overlapped(loc, segmenter.as_mut(), src, i, j, scheme)?;
+                (stereo, stereo_ms, report, track_ms, culled) =
+                    (out.stereo, out.stereo_ms, out.report, out.track_ms, out.culled);
+                let base = extract_wall_ms - this.load_ms;
+                compute_ms = base + out.critical_ms;
+                self.extracted = out.next;
+            }
+            _ => {
+                // Stagewise (or nothing ahead to do): the next frame's labels beside tracking.
+                let next_seg = next.filter(|_| use_net);
+                let seg_work = |seg: Option<&mut Segmenter>| -> Option<Prefetch> {
+                    let (Some(j), Some(seg)) = (next_seg, seg) else { return None };
+                    let t = Instant::now();
+                    let img = src.left(j).ok()?.into_owned();
+                    let load_ms = ms(t);
+                    let t = Instant::now();
+                    let labels = segment(seg, &img, j).ok()?;
+                    Some(Prefetch { index: j, left: img, labels, seg_ms: ms(t), load_ms })
+                };
+                let track = |loc: &mut Localiser| -> Result<_, PipelineError> {
+                    let t = Instant::now();
+                    let stereo = loc.match_stereo(ts).map_err(core_err)?;
+                    let stereo_ms = ms(t);
+                    let culled = loc.culled();
+                    let t = Instant::now();
+                    let report = loc.track();
+                    Ok((stereo, stereo_ms, report, ms(t), culled))
+                };
+                let (tracked, pre) = if two {
+                    std::thread::scope(|s| {
+                        let seg = segmenter.as_mut();
+                        let h = s.spawn(move || seg_work(seg));
+                        let tracked = track(loc);
+                        (tracked, h.join())
+                    })
+                } else {
+                    let tracked = track(loc);
+                    let pre = if tracked.is_ok() { seg_work(segmenter.as_mut()) } else { None };
+                    (tracked, Ok(pre))
+                };
+                let pre =
+                    pre.map_err(|_| PipelineError::Worker("segmentation worker panicked".into()))?;
+                (stereo, stereo_ms, report, track_ms, culled) = tracked?;
+                let next_load_ms = pre.as_ref().map_or(0.0, |p| p.load_ms);
+                compute_ms = (ms(t0) - this.load_ms - next_load_ms).max(0.0);
+                self.prefetched = pre;
+            }
+        }
+        let total_ms = ms(t0);
+        let compute_ms = compute_ms.min(total_ms);
+        self.current = Some((this.left, this.labels));
+        let times = StageTimes {
+            load_ms: total_ms - compute_ms,
+            orb_left_ms: this.orb_left_ms,
+            orb_right_ms: this.orb_right_ms,
+            extract_wall_ms,
+            stereo_ms,
+            track_ms,
+            seg_ms: this.seg_ms,
+            total_ms,
+            compute_ms,
+        };
+        Ok(FrameOutput { report, stereo, times, culled })
+    }
+
+    /// Puts frame `i` into the extractors on this pipeline's threads: its labels (made by the
+    /// previous frame, made now, or the dataset's), then the left and right extractions side
+    /// by side (two threads) or in turn.
+    fn extract_in_turn(
+        &mut self,
+        src: &(impl FrameSource + ?Sized),
+        i: usize,
+    ) -> Result<InExtractors, PipelineError> {
+        let scheme = self.loc.config().semantics;
+        let use_net = scheme.is_some() && self.segmenter.is_some();
+        let core_err = |err| PipelineError::Frame { frame: i, err };
         let mut seg_ms = 0.0;
         let mut seg_load_ms = 0.0;
-        let (left_img, labels): (Option<GrayImage>, Option<GrayImage>) = match prefetched {
-            Some(p) => {
-                seg_ms = p.seg_ms;
-                (Some(p.left), Some(p.labels))
-            }
-            None if use_net => {
-                let t = Instant::now();
-                let img = src.left(i)?.into_owned();
-                seg_load_ms = ms(t);
-                let t = Instant::now();
-                let seg = self
-                    .segmenter
-                    .as_mut()
-                    .ok_or_else(|| PipelineError::Worker("segmenter vanished".into()))?;
-                let labels = segment(seg, &img, i)?;
-                seg_ms = ms(t);
-                (Some(img), Some(labels))
-            }
-            None => (None, None),
-        };
-        let next = (use_net && i + 1 < src.len()).then_some(i + 1);
-        let core_err = |err| PipelineError::Frame { frame: i, err };
-
-        // The right image: load and extract (the second thread's first job).
+        let (left_img, labels): (Option<GrayImage>, Option<GrayImage>) =
+            match self.prefetched.take().filter(|p| p.index == i) {
+                Some(p) => {
+                    seg_ms = p.seg_ms;
+                    (Some(p.left), Some(p.labels))
+                }
+                None if use_net => {
+                    let t = Instant::now();
+                    let img = src.left(i)?.into_owned();
+                    seg_load_ms = ms(t);
+                    let t = Instant::now();
+                    let seg = self
+                        .segmenter
+                        .as_mut()
+                        .ok_or_else(|| PipelineError::Worker("segmenter vanished".into()))?;
+                    let labels = segment(seg, &img, i)?;
+                    seg_ms = ms(t);
+                    (Some(img), Some(labels))
+                }
+                None => (None, None),
+            };
+        // The right image: load and extract (the second thread's job).
         let right_work = |ex: &mut RightExtraction<'_>| -> Result<(f64, f64), PipelineError> {
             let t = Instant::now();
             let img = src.right(i)?;
@@ -460,7 +654,8 @@ impl Pipeline {
             Ok((load, ms(t)))
         };
         // This thread: the left image and its labels, weighted ORB.
-        let left_work = |ex: &mut LeftExtraction<'_>| -> Result<(f64, f64), PipelineError> {
+        type Left = (GrayImage, Option<GrayImage>, f64, f64);
+        let left_work = |ex: &mut LeftExtraction<'_>| -> Result<Left, PipelineError> {
             let t = Instant::now();
             let img = match left_img {
                 Some(img) => img,
@@ -477,81 +672,28 @@ impl Pipeline {
                 view(l).and_then(|v| ex.set_labels(&v)).map_err(core_err)?;
             }
             view(&img).and_then(|v| ex.run(&v)).map_err(core_err)?;
-            Ok((load, ms(t)))
+            Ok((img, labels, load, ms(t)))
         };
-        // The next frame's labels (the second thread's job while this frame is tracked).
-        let seg_work = |seg: Option<&mut Segmenter>| -> Result<Option<Prefetch>, PipelineError> {
-            let (Some(j), Some(seg)) = (next, seg) else { return Ok(None) };
-            let t = Instant::now();
-            let img = src.left(j)?.into_owned();
-            let load_ms = ms(t);
-            let t = Instant::now();
-            let labels = segment(seg, &img, j)?;
-            Ok(Some(Prefetch { index: j, left: img, labels, seg_ms: ms(t), load_ms }))
-        };
-        // Stereo matching + tracking (the same call in both schedules).
-        let track = |loc: &mut Localiser| -> Result<Tracked, PipelineError> {
-            let t = Instant::now();
-            let stereo = loc.match_stereo(ts).map_err(core_err)?;
-            let stereo_ms = ms(t);
-            let t = Instant::now();
-            let report = loc.track();
-            Ok(Tracked { stereo, stereo_ms, report, track_ms: ms(t) })
-        };
-
-        let Pipeline { loc, segmenter, threads, .. } = self;
-        let (left, right, extract_done, tracked, pre) = if *threads >= 2 {
-            let (mut l_ex, mut r_ex) = loc.extractors_mut();
+        let (mut l_ex, mut r_ex) = self.loc.extractors_mut();
+        let (l, r) = if self.threads >= 2 {
             let (l, r) = std::thread::scope(|s| {
                 let h = s.spawn(move || right_work(&mut r_ex));
                 let l = left_work(&mut l_ex);
                 (l, h.join())
             });
-            let r = r.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))?;
-            let extract_done = Instant::now();
-            let (l, r) = (l?, r?);
-            let (tracked, pre) = std::thread::scope(|s| {
-                let seg = segmenter.as_mut();
-                let h = s.spawn(move || seg_work(seg));
-                let tracked = track(loc);
-                (tracked, h.join())
-            });
-            let pre =
-                pre.map_err(|_| PipelineError::Worker("segmentation worker panicked".into()))?;
-            (l, r, extract_done, tracked, pre)
+            (l, r.map_err(|_| PipelineError::Worker("right-image worker panicked".into()))?)
         } else {
-            let (mut l_ex, mut r_ex) = loc.extractors_mut();
-            let r = right_work(&mut r_ex)?;
-            let l = left_work(&mut l_ex)?;
-            let extract_done = Instant::now();
-            let tracked = track(loc);
-            let pre = if tracked.is_ok() { seg_work(segmenter.as_mut()) } else { Ok(None) };
-            (l, r, extract_done, tracked, pre)
+            let r = right_work(&mut r_ex);
+            (left_work(&mut l_ex), r)
         };
-        let ((left_load_ms, orb_left_ms), (right_load_ms, orb_right_ms)) = (left, right);
-        let tracked = tracked?;
-        let pre = pre?;
-        let next_load_ms = pre.as_ref().map_or(0.0, |p| p.load_ms);
-        self.prefetched = pre;
-        let total_ms = ms(t0);
-        let load_ms = seg_load_ms + left_load_ms.max(right_load_ms) + next_load_ms;
-        let times = StageTimes {
-            load_ms,
-            orb_left_ms,
-            orb_right_ms,
-            extract_wall_ms: extract_done.duration_since(t0).as_secs_f64() * 1e3,
-            stereo_ms: tracked.stereo_ms,
-            track_ms: tracked.track_ms,
-            seg_ms,
-            total_ms,
-            compute_ms: (total_ms - load_ms).max(0.0),
-        };
-        Ok(FrameOutput {
-            report: tracked.report,
-            stereo: tracked.stereo,
-            times,
-            culled: self.loc.culled(),
-        })
+        let ((left, labels, left_load_ms, orb_left_ms), (right_load_ms, orb_right_ms)) = (l?, r?);
+        let load_ms = seg_load_ms
+            + if self.threads >= 2 {
+                left_load_ms.max(right_load_ms)
+            } else {
+                left_load_ms + right_load_ms
+            };
+        Ok(InExtractors { left, labels, orb_left_ms, orb_right_ms, seg_ms, load_ms })
     }
 
     /// Extracts frame `i`'s left ORB features twice, plain and with `scheme`'s semantic
@@ -565,6 +707,8 @@ impl Pipeline {
         i: usize,
         scheme: WeightScheme,
     ) -> Result<(CategoryCounts, CategoryCounts), PipelineError> {
+        // The left extractor is used here: work done ahead for the next frame is gone.
+        self.forget_ahead();
         let img = src.left(i)?.into_owned();
         let labels = match self.segmenter.as_mut() {
             Some(seg) => segment(seg, &img, i)?,
@@ -597,12 +741,147 @@ impl Pipeline {
     }
 }
 
-/// Stereo matching and tracking of one frame, with their times.
-struct Tracked {
+/// What the overlapped schedule's step gives for frame `i`, and frame `j`'s features made
+/// beside it.
+struct Overlapped {
     stereo: StereoStats,
     stereo_ms: f64,
     report: FrameReport,
     track_ms: f64,
+    culled: u32,
+    /// Wall time of the step on the slower thread, less that thread's decoding.
+    critical_ms: f64,
+    /// Frame `j`, extracted (`None` when any part of it failed: it is then made in turn).
+    next: Option<Extracted>,
+}
+
+/// Frame `i`'s stereo matching and tracking on this thread while a second one labels frame `j`
+/// and extracts its left features; `j`'s right extraction goes to whichever thread is free
+/// first. Frame `i`'s results are the same bits as in turn ([`Localiser::split_for_tracking`]).
+fn overlapped<S: FrameSource + ?Sized>(
+    loc: &mut Localiser,
+    segmenter: Option<&mut Segmenter>,
+    src: &S,
+    i: usize,
+    j: usize,
+    scheme: Option<WeightScheme>,
+) -> Result<Overlapped, PipelineError> {
+    let t0 = Instant::now();
+    let ts = src.timestamp_s(i);
+    let right_slot = Mutex::new(None);
+    let slot = &right_slot;
+    let (tx, rx) = std::sync::mpsc::channel::<LeftExtraction<'_>>();
+    // Frame j's labels and left features (the second thread).
+    let next_left = move || -> Result<NextLeft, PipelineError> {
+        let t = Instant::now();
+        let left = src.left(j)?.into_owned();
+        let mut load_ms = ms(t);
+        let t = Instant::now();
+        let (labels, seg_ms) = match (scheme, segmenter) {
+            (None, _) => (None, 0.0),
+            (Some(_), Some(seg)) => {
+                let l = segment(seg, &left, j)?;
+                (Some(l), ms(t))
+            }
+            (Some(_), None) => {
+                let l = src.labels(j)?.into_owned();
+                load_ms += ms(t);
+                (Some(l), 0.0)
+            }
+        };
+        // The extractors are free once frame i is matched.
+        let mut ex =
+            rx.recv().map_err(|_| PipelineError::Worker(format!("frame {i} not matched")))?;
+        let err = |err| PipelineError::Frame { frame: j, err };
+        let t = Instant::now();
+        if let Some(l) = &labels {
+            view(l).and_then(|v| ex.set_labels(&v)).map_err(err)?;
+        }
+        view(&left).and_then(|v| ex.run(&v)).map_err(err)?;
+        let orb_left_ms = ms(t);
+        let right = take_right(slot, src, j);
+        Ok(NextLeft { left, labels, seg_ms, orb_left_ms, load_ms, right, end_ms: ms(t0) })
+    };
+    std::thread::scope(move |s| {
+        let h = s.spawn(next_left);
+        let t = Instant::now();
+        let stereo = loc.match_stereo(ts);
+        let stereo_ms = ms(t);
+        let stereo = match stereo {
+            Ok(st) => st,
+            Err(err) => {
+                drop(tx);
+                let _ = h.join();
+                return Err(PipelineError::Frame { frame: i, err });
+            }
+        };
+        let culled = loc.culled();
+        let (mut tracking, l_ex, r_ex) = loc.split_for_tracking();
+        if let Ok(mut g) = slot.lock() {
+            *g = Some(r_ex);
+        }
+        if tx.send(l_ex).is_err() {
+            // The second thread stopped before (frame j failed to load or label).
+            if let Ok(mut g) = slot.lock() {
+                g.take();
+            }
+        }
+        let t = Instant::now();
+        let report = tracking.track();
+        let track_ms = ms(t);
+        let right_here = take_right(slot, src, j);
+        let end_here = ms(t0);
+        let there =
+            h.join().map_err(|_| PipelineError::Worker("next-frame worker panicked".into()))?;
+        let load_here = match &right_here {
+            Some(Ok((load, _))) => *load,
+            _ => 0.0,
+        };
+        let mut critical_ms = end_here - load_here;
+        let next = there.ok().and_then(|nl| {
+            // Exactly one thread took the right extraction; its decoding is not compute.
+            let (right, right_load_there) = match (right_here, nl.right) {
+                (Some(r), None) => (r.ok()?, 0.0),
+                (None, Some(r)) => {
+                    let r = r.ok()?;
+                    (r, r.0)
+                }
+                _ => return None,
+            };
+            critical_ms = critical_ms.max(nl.end_ms - nl.load_ms - right_load_there);
+            Some(Extracted {
+                index: j,
+                left: nl.left,
+                labels: nl.labels,
+                orb_left_ms: nl.orb_left_ms,
+                orb_right_ms: right.1,
+                seg_ms: nl.seg_ms,
+            })
+        });
+        Ok(Overlapped { stereo, stereo_ms, report, track_ms, culled, critical_ms, next })
+    })
+}
+
+/// Frame `j`'s right extraction, when no thread has taken it yet: (load, ORB) ms.
+fn take_right<S: FrameSource + ?Sized>(
+    slot: &Mutex<Option<RightExtraction<'_>>>,
+    src: &S,
+    j: usize,
+) -> Option<Result<(f64, f64), PipelineError>> {
+    let mut ex = slot.lock().ok()?.take()?;
+    let t = Instant::now();
+    let img = match src.right(j) {
+        Ok(img) => img,
+        Err(e) => return Some(Err(e)),
+    };
+    let load = ms(t);
+    let t = Instant::now();
+    Some(
+        view(&img)
+            .and_then(|v| ex.run(&v))
+            .map(|()| (load, ms(t)))
+            .map_err(|err| PipelineError::Frame { frame: j, err }),
+    )
 }
 
 /// The network's labels of one left frame, as an image.

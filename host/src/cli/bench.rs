@@ -1,6 +1,8 @@
 //! `semloc bench`: whole-pipeline and per-stage timings, as ratios to references measured in
-//! the same invocation (OpenCV's ORB on the same frames; the pipeline on one thread; with
-//! `--model`/`--onnx`, the int8 segmentation network against tract running its float ONNX).
+//! the same invocation (OpenCV's ORB on the same frames; the pipeline on one thread and with
+//! the stagewise two-thread schedule; with `--model`, the pipeline with the network, full
+//! semantics and EM as well; with `--onnx` too, the int8 segmentation network against tract
+//! running its float ONNX).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,10 +10,14 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use image::GrayImage;
-use semloc::pipeline::{MemoryFrames, Pipeline, BIG_STACK_BYTES};
-use semloc::run::{percentiles, stats::stage_percentiles, track_frames, FrameRecord, Percentiles};
+use semloc::pipeline::{MemoryFrames, Pipeline, Schedule, BIG_STACK_BYTES};
+use semloc::run::{
+    load_network, percentiles, stats::stage_percentiles, track_frames, FrameRecord, Percentiles,
+};
+use semloc_core::assoc::Association;
 use semloc_core::image::ImageView;
 use semloc_core::orb::{KittiOrbExtractor, OrbConfig};
+use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
 
 use super::info::DatasetArgs;
@@ -38,14 +44,16 @@ pub struct BenchArgs {
     /// Also write the figures as JSON here.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Segmentation section: the int8 model (`semloc convert`), timed against --onnx.
-    #[arg(long, value_name = "X.slm", requires = "onnx")]
+    /// The int8 model (`semloc convert`): the pipeline is timed a second time with it labelling
+    /// the frames, full semantics and EM association (the deployed setting); with --onnx, the
+    /// segmentation section times it against tract.
+    #[arg(long, value_name = "X.slm")]
     pub model: Option<PathBuf>,
     /// The float ONNX the model was converted from, run by tract (f32, 1 thread).
     #[arg(long, value_name = "X.onnx", requires = "model")]
     pub onnx: Option<PathBuf>,
     /// Only the segmentation section (skips ORB, OpenCV and the pipeline).
-    #[arg(long, requires = "model")]
+    #[arg(long, requires = "onnx")]
     pub seg_only: bool,
 }
 
@@ -79,11 +87,31 @@ struct BenchReport {
     orb_semloc_1thread: Percentiles,
     orb_opencv_1thread: Option<serde_json::Value>,
     orb_ratio_semloc_over_opencv: Option<f64>,
-    pipeline_1thread: std::collections::BTreeMap<&'static str, Percentiles>,
-    pipeline_2threads: std::collections::BTreeMap<&'static str, Percentiles>,
-    wall_ratio_2_over_1_threads: f64,
+    /// The geometric backbone.
+    pipeline: PipelineBench,
+    /// With `--model`: the network labelling, full semantics, EM association.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pipeline_network_full_em: Option<PipelineBench>,
     #[serde(skip_serializing_if = "Option::is_none")]
     segmentation: Option<SegBench>,
+}
+
+type StageTable = std::collections::BTreeMap<&'static str, Percentiles>;
+
+/// One pipeline setup timed three ways on the same frames, one after the other.
+#[derive(Debug, serde::Serialize)]
+struct PipelineBench {
+    one_thread: StageTable,
+    /// Two threads, [`Schedule::Stagewise`]: both extractions side by side, then tracking
+    /// beside the next frame's labelling.
+    two_threads_stagewise: StageTable,
+    /// Two threads, [`Schedule::Overlapped`] (the default): the next frame labelled and
+    /// extracted while this one is tracked.
+    two_threads: StageTable,
+    /// Median frame time, two threads (default schedule) over one thread.
+    wall_ratio_2_over_1_threads: f64,
+    /// Median frame time, overlapped over stagewise.
+    wall_ratio_overlapped_over_stagewise: f64,
 }
 
 /// Runs `semloc bench`.
@@ -148,7 +176,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let opencv = if args.no_opencv { None } else { opencv_reference(args, &lefts, repeat)? };
     let ratio = opencv.as_ref().and_then(|v| v["median_ms"].as_f64()).map(|cv| orb.median_ms / cv);
 
-    // Whole pipeline: one thread (reference) then two, same frames, fresh tracker each.
+    // Whole pipeline: one thread (reference), two stagewise, two overlapped; same frames, a
+    // fresh tracker each.
     let frames = MemoryFrames {
         left: &lefts,
         right: &rights,
@@ -156,30 +185,19 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         first_index: 0,
         times_s: &seq.times_s,
     };
-    let one = pipeline_times(&seq, &frames, 1)?;
-    let two = pipeline_times(&seq, &frames, 2)?;
-    // `semloc run`'s stages without loading (the frames are in memory); `frame` is `compute`
-    let stage_table = |records: &[FrameRecord]| {
-        let all = stage_percentiles(records, false);
-        let mut m: std::collections::BTreeMap<&'static str, Percentiles> =
-            ["orb_left", "orb_right", "extract_wall", "stereo", "track"]
-                .into_iter()
-                .filter_map(|k| Some((k, *all.get(k)?)))
-                .collect();
-        m.insert("frame", all.get("compute").copied().unwrap_or_default());
-        m
+    let pipeline = pipeline_bench(&seq, &frames, None)?;
+    let pipeline_network_full_em = match &args.model {
+        Some(m) => Some(pipeline_bench(&seq, &frames, Some(m))?),
+        None => None,
     };
-    let (t1, t2) = (stage_table(&one), stage_table(&two));
-    let wall_ratio = t2["frame"].median_ms / t1["frame"].median_ms;
     let report = BenchReport {
         frames: n,
         image_size: (w, h),
         orb_semloc_1thread: orb,
         orb_opencv_1thread: opencv,
         orb_ratio_semloc_over_opencv: ratio,
-        pipeline_1thread: t1,
-        pipeline_2threads: t2,
-        wall_ratio_2_over_1_threads: wall_ratio,
+        pipeline,
+        pipeline_network_full_em,
         segmentation: seg,
     };
     print_report(&report);
@@ -300,13 +318,56 @@ fn print_seg(s: &SegBench) {
 }
 
 /// Tracks the in-memory `frames` with a fresh pipeline on `threads` threads.
+/// Times the pipeline on `frames` with one thread, then two stagewise, then two overlapped
+/// (with `network`: that model labelling, full semantics, EM association).
+fn pipeline_bench(
+    seq: &semloc::dataset::Sequence,
+    frames: &MemoryFrames<'_>,
+    network: Option<&std::path::Path>,
+) -> Result<PipelineBench> {
+    // `semloc run`'s stages without loading (the frames are in memory); `frame` is `compute`
+    let table = |threads, schedule| -> Result<StageTable> {
+        let records = pipeline_times(seq, frames, threads, schedule, network)?;
+        let all = stage_percentiles(&records, network.is_some());
+        let mut m: StageTable =
+            ["orb_left", "orb_right", "extract_wall", "stereo", "track", "segment"]
+                .into_iter()
+                .filter_map(|k| Some((k, *all.get(k)?)))
+                .collect();
+        m.insert("frame", all.get("compute").copied().unwrap_or_default());
+        Ok(m)
+    };
+    let one_thread = table(1, Schedule::Overlapped)?;
+    let two_threads_stagewise = table(2, Schedule::Stagewise)?;
+    let two_threads = table(2, Schedule::Overlapped)?;
+    let med = |t: &StageTable| t["frame"].median_ms;
+    Ok(PipelineBench {
+        wall_ratio_2_over_1_threads: med(&two_threads) / med(&one_thread),
+        wall_ratio_overlapped_over_stagewise: med(&two_threads) / med(&two_threads_stagewise),
+        one_thread,
+        two_threads_stagewise,
+        two_threads,
+    })
+}
+
 fn pipeline_times(
     seq: &semloc::dataset::Sequence,
     frames: &MemoryFrames<'_>,
     threads: usize,
+    schedule: Schedule,
+    network: Option<&std::path::Path>,
 ) -> Result<Vec<FrameRecord>> {
     let (w, h) = seq.image_size;
-    let mut p = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), threads)?;
+    let mut params = TrackerParams::default();
+    if network.is_some() {
+        params.association = Association::Em;
+    }
+    let mut p = Pipeline::new(&seq.calib, w, h, params, threads)?;
+    p.set_schedule(schedule);
+    if let Some(m) = network {
+        p.set_segmenter(load_network(m, w, h)?);
+        p.set_semantics(Some(WeightScheme::Full));
+    }
     let tracked = track_frames(&mut p, frames, frames.left.len(), None, &mut |_, _| Ok(()));
     match tracked.failure {
         Some(e) => Err(e.into()),
@@ -369,6 +430,24 @@ fn tempfile_dir() -> Result<PathBuf> {
     Ok(d)
 }
 
+fn print_pipeline(p: &PipelineBench) {
+    println!(
+        "{:<14}{:>12}{:>10}{:>12}{:>10}{:>12}{:>10}",
+        "stage [ms]", "1 thr med", "p99", "stagewise", "p99", "2 thr med", "p99"
+    );
+    for (k, a) in &p.one_thread {
+        let (b, c) = (p.two_threads_stagewise[k], p.two_threads[k]);
+        println!(
+            "{k:<14}{:>12.2}{:>10.2}{:>12.2}{:>10.2}{:>12.2}{:>10.2}",
+            a.median_ms, a.p99_ms, b.median_ms, b.p99_ms, c.median_ms, c.p99_ms
+        );
+    }
+    println!(
+        "frame wall time, 2 threads / 1 thread = {:.2}; overlapped / stagewise = {:.2}",
+        p.wall_ratio_2_over_1_threads, p.wall_ratio_overlapped_over_stagewise
+    );
+}
+
 fn print_report(r: &BenchReport) {
     println!("{} frames, {}x{}", r.frames, r.image_size.0, r.image_size.1);
     println!(
@@ -383,18 +462,12 @@ fn print_report(r: &BenchReport) {
             cv["p99_ms"].as_f64().unwrap_or(f64::NAN)
         );
     }
-    println!(
-        "{:<14}{:>12}{:>10}{:>12}{:>10}",
-        "stage [ms]", "1 thr med", "p99", "2 thr med", "p99"
-    );
-    for (k, a) in &r.pipeline_1thread {
-        let b = r.pipeline_2threads[k];
-        println!(
-            "{k:<14}{:>12.2}{:>10.2}{:>12.2}{:>10.2}",
-            a.median_ms, a.p99_ms, b.median_ms, b.p99_ms
-        );
+    println!("pipeline, geometric backbone:");
+    print_pipeline(&r.pipeline);
+    if let Some(p) = &r.pipeline_network_full_em {
+        println!("pipeline, network labels + full semantics + EM:");
+        print_pipeline(p);
     }
-    println!("frame wall time, 2 threads / 1 thread = {:.2}", r.wall_ratio_2_over_1_threads);
     if let Some(s) = &r.segmentation {
         print_seg(s);
     }

@@ -30,8 +30,9 @@ pub struct RunArgs {
     /// Process only the first N frames (N ≥ 1).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub max_frames: Option<u64>,
-    /// Worker threads: 2 extracts the left and right images in parallel (the target has two
-    /// cores); 1 runs everything on one thread. Results are identical either way.
+    /// Worker threads: with 2 the next frame is labelled and its ORB features extracted while
+    /// this one is tracked (the target has two cores); 1 runs everything on one thread. Results
+    /// are identical either way.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(1..=2))]
     pub threads: u8,
     /// `--config` / `--orbslam2-settings`.

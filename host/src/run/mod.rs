@@ -666,6 +666,7 @@ pub fn track_frames(
     on_frame: &mut dyn FnMut(&Pipeline, &FrameRecord) -> Result<(), RunError>,
 ) -> Tracked {
     let mut frames = Vec::with_capacity(n);
+    pipe.set_end(Some(n));
     for i in 0..n {
         if let Some(sig) = stop.and_then(StopFlag::requested) {
             return Tracked { frames, failure: Some(RunFailure::Signal(sig)) };

@@ -174,33 +174,35 @@ impl Recorder {
                 rerun::Quaternion::from_xyzw(q),
             ),
         )?;
-        let loc = pipe.localiser();
-        // The left image as the extractor holds it (no second decode from disk), as JPEG
-        // (quality 90): a KITTI frame takes ~70 KB instead of 467 KB raw.
-        let left = loc.left_extractor().pyramid().level(0);
-        let pixels: Vec<u8> = (0..left.height()).flat_map(|y| left.row(y)).copied().collect();
-        let mut jpeg = Vec::new();
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY).encode(
-            &pixels,
-            left.width() as u32,
-            left.height() as u32,
-            image::ExtendedColorType::L8,
-        )?;
-        rec.log(
-            "world/camera/image",
-            &rerun::EncodedImage::from_file_contents(jpeg).with_media_type(rerun::MediaType::JPEG),
-        )?;
-        if let Some(labels) = loc.labels() {
+        // The frame's left image as the pipeline decoded it (no second decode from disk), as
+        // JPEG (quality 90): a KITTI frame takes ~70 KB instead of 467 KB raw. The extractors
+        // may already hold the next frame.
+        if let Some(left) = pipe.left_image() {
+            let mut jpeg = Vec::new();
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, JPEG_QUALITY).encode(
+                left.as_raw(),
+                left.width(),
+                left.height(),
+                image::ExtendedColorType::L8,
+            )?;
+            rec.log(
+                "world/camera/image",
+                &rerun::EncodedImage::from_file_contents(jpeg)
+                    .with_media_type(rerun::MediaType::JPEG),
+            )?;
+        }
+        if let Some(labels) = pipe.labels() {
             let format = rerun::datatypes::ImageFormat::segmentation(
                 [self.width, self.height],
                 rerun::datatypes::ChannelDatatype::U8,
             );
             rec.log(
                 "world/camera/image/segmentation",
-                &rerun::SegmentationImage::new(labels.to_vec(), format).with_opacity(0.45),
+                &rerun::SegmentationImage::new(labels.as_raw().clone(), format).with_opacity(0.45),
             )?;
         }
 
+        let loc = pipe.localiser();
         let feats = &loc.frame().features;
         let xy: Vec<[f32; 2]> = feats.iter().map(|f| [f.x, f.y]).collect();
         let class: Vec<u16> = feats.iter().map(|f| u16::from(f.class.min(VOID))).collect();

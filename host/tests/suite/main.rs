@@ -13,5 +13,6 @@ mod map_export;
 mod outputs_doc;
 mod rerun_viewer;
 mod runner;
+mod schedules;
 mod seg_cli;
 mod settings_gt;
