@@ -374,16 +374,8 @@ impl Localiser {
     /// must have run before [`Self::match_stereo`]. The left one owns the frame's labels (set
     /// them there or before) and applies their semantic weights.
     pub fn extractors_mut(&mut self) -> (LeftExtraction<'_>, RightExtraction<'_>) {
-        let size = (self.width, self.height);
-        (
-            LeftExtraction {
-                ex: &mut self.left,
-                sem: &mut self.sem,
-                scheme: self.config.semantics,
-                size,
-            },
-            RightExtraction { ex: &mut self.right, size },
-        )
+        let (_, left, right) = self.split_for_tracking();
+        (left, right)
     }
 
     /// Both extractions on this thread (right, then left: the order does not matter, the two
