@@ -161,13 +161,16 @@ pub enum PipelineError {
 /// Milliseconds spent in each stage of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StageTimes {
-    /// Decoding both PNGs (in parallel: the slower of the two).
+    /// The part of the frame's wall time spent decoding images (`total_ms - compute_ms`;
+    /// decoding on two threads at once counts once).
     pub load_ms: f64,
-    /// ORB on the left image.
+    /// ORB on the left image (with two threads, overlapped: made while the previous frame was
+    /// tracked).
     pub orb_left_ms: f64,
-    /// ORB on the right image (in parallel with the left).
+    /// ORB on the right image (beside the left, or, overlapped, beside the previous frame).
     pub orb_right_ms: f64,
-    /// Wall time of the parallel load + extraction step.
+    /// Wall time until the frame's features were extracted: 0 when the previous frame made
+    /// them (two threads, overlapped).
     pub extract_wall_ms: f64,
     /// Stereo matching.
     pub stereo_ms: f64,

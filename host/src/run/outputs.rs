@@ -29,16 +29,18 @@ pub struct FrameRow {
     /// Frame time (s from the source's time zero).
     #[serde(serialize_with = "fixed6")]
     pub timestamp_s: f64,
-    /// Decoding both images (ms; in parallel: the slower of the two).
+    /// The part of the frame's wall time spent decoding images (ms; `total_ms - compute_ms`).
     #[serde(serialize_with = "fixed3")]
     pub load_ms: f64,
-    /// ORB extraction on the left image (ms).
+    /// ORB extraction on the left image (ms; with two threads, made while the previous frame
+    /// was tracked).
     #[serde(serialize_with = "fixed3")]
     pub orb_left_ms: f64,
     /// ORB extraction on the right image (ms).
     #[serde(serialize_with = "fixed3")]
     pub orb_right_ms: f64,
-    /// Wall time of the parallel load + extraction step (ms).
+    /// Wall time until the frame's features were extracted (ms; 0 when the previous frame made
+    /// them).
     #[serde(serialize_with = "fixed3")]
     pub extract_wall_ms: f64,
     /// Stereo matching (ms).
