@@ -324,11 +324,7 @@ struct Prefetch {
 /// features; its images and stage times are kept for its own frame's output.
 struct Extracted {
     index: usize,
-    left: GrayImage,
-    labels: Option<GrayImage>,
-    orb_left_ms: f64,
-    orb_right_ms: f64,
-    seg_ms: f64,
+    frame: InExtractors,
 }
 
 /// Frame `i` in the extractors: its images and what putting it there cost.
@@ -524,17 +520,8 @@ impl Pipeline {
         let ts = src.timestamp_s(i);
         let core_err = |err| PipelineError::Frame { frame: i, err };
         // Frame i's features: extracted while the previous frame was tracked, or now.
-        let ahead = self.extracted.take().filter(|x| x.index == i);
-        self.prefetched = self.prefetched.take().filter(|p| p.index == i);
-        let this = match ahead {
-            Some(x) => InExtractors {
-                left: x.left,
-                labels: x.labels,
-                orb_left_ms: x.orb_left_ms,
-                orb_right_ms: x.orb_right_ms,
-                seg_ms: x.seg_ms,
-                load_ms: 0.0,
-            },
+        let this = match self.extracted.take().filter(|x| x.index == i) {
+            Some(x) => x.frame,
             None => self.extract_in_turn(src, i)?,
         };
         let extract_wall_ms = ms(t0);
@@ -648,14 +635,7 @@ impl Pipeline {
                 None => (None, None),
             };
         // The right image: load and extract (the second thread's job).
-        let right_work = |ex: &mut RightExtraction<'_>| -> Result<(f64, f64), PipelineError> {
-            let t = Instant::now();
-            let img = src.right(i)?;
-            let load = ms(t);
-            let t = Instant::now();
-            view(&img).and_then(|v| ex.run(&v)).map_err(core_err)?;
-            Ok((load, ms(t)))
-        };
+        let right_work = |ex: &mut RightExtraction<'_>| extract_right(ex, src, i);
         // This thread: the left image and its labels, weighted ORB.
         type Left = (GrayImage, Option<GrayImage>, f64, f64);
         let left_work = |ex: &mut LeftExtraction<'_>| -> Result<Left, PipelineError> {
@@ -852,14 +832,16 @@ fn overlapped<S: FrameSource + ?Sized>(
                 _ => return None,
             };
             critical_ms = critical_ms.max(nl.end_ms - nl.load_ms - right_load_there);
-            Some(Extracted {
-                index: j,
+            let frame = InExtractors {
                 left: nl.left,
                 labels: nl.labels,
                 orb_left_ms: nl.orb_left_ms,
                 orb_right_ms: right.1,
                 seg_ms: nl.seg_ms,
-            })
+                // Decoded beside the previous frame: none of it is on this frame's wall time.
+                load_ms: 0.0,
+            };
+            Some(Extracted { index: j, frame })
         });
         Ok(Overlapped { stereo, stereo_ms, report, track_ms, culled, critical_ms, next })
     })
@@ -872,19 +854,21 @@ fn take_right<S: FrameSource + ?Sized>(
     j: usize,
 ) -> Option<Result<(f64, f64), PipelineError>> {
     let mut ex = slot.lock().ok()?.take()?;
+    Some(extract_right(&mut ex, src, j))
+}
+
+/// Loads frame `i`'s right image and extracts its features: (load, ORB) ms.
+fn extract_right<S: FrameSource + ?Sized>(
+    ex: &mut RightExtraction<'_>,
+    src: &S,
+    i: usize,
+) -> Result<(f64, f64), PipelineError> {
     let t = Instant::now();
-    let img = match src.right(j) {
-        Ok(img) => img,
-        Err(e) => return Some(Err(e)),
-    };
+    let img = src.right(i)?;
     let load = ms(t);
     let t = Instant::now();
-    Some(
-        view(&img)
-            .and_then(|v| ex.run(&v))
-            .map(|()| (load, ms(t)))
-            .map_err(|err| PipelineError::Frame { frame: j, err }),
-    )
+    view(&img).and_then(|v| ex.run(&v)).map_err(|err| PipelineError::Frame { frame: i, err })?;
+    Ok((load, ms(t)))
 }
 
 /// The network's labels of one left frame, as an image.

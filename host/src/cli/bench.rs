@@ -317,7 +317,6 @@ fn print_seg(s: &SegBench) {
     }
 }
 
-/// Tracks the in-memory `frames` with a fresh pipeline on `threads` threads.
 /// Times the pipeline on `frames` with one thread, then two stagewise, then two overlapped
 /// (with `network`: that model labelling, full semantics, EM association).
 fn pipeline_bench(
@@ -350,6 +349,7 @@ fn pipeline_bench(
     })
 }
 
+/// Tracks the in-memory `frames` with a fresh pipeline on `threads` threads.
 fn pipeline_times(
     seq: &semloc::dataset::Sequence,
     frames: &MemoryFrames<'_>,
