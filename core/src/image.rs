@@ -346,7 +346,7 @@ pub(crate) fn round_i32(v: f32) -> i32 {
 
 /// Source index and weight of the next sample for destination index `d`, OpenCV-style:
 /// `f = (d + 0.5)·scale − 0.5`, `i = ⌊f⌋`, clamped to `[0, n−1]` with weight 0 at the clamp.
-#[inline]
+#[inline(always)]
 fn resize_coord(d: usize, scale: f64, n: usize) -> (usize, u32) {
     let f = ((d as f64 + 0.5) * scale - 0.5) as f32;
     let mut i = f as i32;
@@ -390,6 +390,7 @@ impl<const MAX_W: usize> ResizeScratch<MAX_W> {
 }
 
 /// Horizontal pass for one source row: `out[x] = src[x0]·(2048−w) + src[x0+1]·w`.
+#[inline(always)]
 fn resize_row_h(src: &[u8], x0: &[u32], wx: &[u32], out: &mut [u32]) {
     let last = src.len() - 1;
     for ((o, &i), &w) in out.iter_mut().zip(x0).zip(wx) {
@@ -405,7 +406,21 @@ fn resize_row_h(src: &[u8], x0: &[u32], wx: &[u32], out: &mut [u32]) {
 ///
 /// Each source row is interpolated horizontally once and kept while two consecutive
 /// destination rows need it; the vertical blend is a plain `u32` loop that vectorises.
+///
+/// Runs as x86-64-v3 code where the CPU has it ([`crate::arch::v3`]; the same bits).
 pub fn resize_bilinear<const MAX_W: usize>(
+    src: &ImageView<'_>,
+    dst: &mut ImageViewMut<'_>,
+    scratch: &mut ResizeScratch<MAX_W>,
+) -> Result<(), ImageError> {
+    crate::arch::v3(
+        #[inline(always)]
+        || resize_bilinear_body(src, dst, scratch),
+    )
+}
+
+#[inline(always)]
+fn resize_bilinear_body<const MAX_W: usize>(
     src: &ImageView<'_>,
     dst: &mut ImageViewMut<'_>,
     scratch: &mut ResizeScratch<MAX_W>,
@@ -473,7 +488,7 @@ pub fn resize_bilinear<const MAX_W: usize>(
 pub const GAUSS7_Q8: [u32; 7] = [18, 33, 49, 56, 49, 33, 18];
 
 /// `BORDER_REFLECT_101` index: `…, 2, 1 | 0, 1, 2, … n−1 | n−2, …`.
-#[inline]
+#[inline(always)]
 fn reflect101(i: isize, n: usize) -> usize {
     let n = n as isize;
     if n == 1 {
@@ -511,6 +526,7 @@ impl<const MAX_W: usize> BlurScratch<MAX_W> {
 }
 
 /// Horizontal 7-tap pass of one row into `u16` (exact: at most 255·256).
+#[inline(always)]
 fn blur_row_h(src: &[u8], out: &mut [u16]) {
     let w = src.len();
     let k = &GAUSS7_Q8;
@@ -548,7 +564,21 @@ fn blur_row_h(src: &[u8], out: &mut [u16]) {
 /// round-half-up at the end: bit-identical on every target.
 ///
 /// `src` and `dst` must have the same size; `src.width() <= MAX_W`.
+///
+/// Runs as x86-64-v3 code where the CPU has it ([`crate::arch::v3`]; the same bits).
 pub fn gaussian_blur_7x7<const MAX_W: usize>(
+    src: &ImageView<'_>,
+    dst: &mut ImageViewMut<'_>,
+    scratch: &mut BlurScratch<MAX_W>,
+) -> Result<(), ImageError> {
+    crate::arch::v3(
+        #[inline(always)]
+        || gaussian_blur_7x7_body(src, dst, scratch),
+    )
+}
+
+#[inline(always)]
+fn gaussian_blur_7x7_body<const MAX_W: usize>(
     src: &ImageView<'_>,
     dst: &mut ImageViewMut<'_>,
     scratch: &mut BlurScratch<MAX_W>,

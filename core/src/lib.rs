@@ -90,6 +90,7 @@
     )
 )]
 
+pub mod arch;
 pub mod assoc;
 pub mod frame;
 pub mod geom;

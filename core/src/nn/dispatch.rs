@@ -56,7 +56,7 @@ fn thread_cap() -> Isa {
 /// in tests, by the thread's cap).
 #[cfg(target_arch = "x86_64")]
 #[inline]
-fn level() -> Isa {
+pub(crate) fn level() -> Isa {
     x86::isa().min(thread_cap())
 }
 

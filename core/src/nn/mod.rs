@@ -89,7 +89,7 @@
 use core::fmt;
 
 pub mod conv;
-mod dispatch;
+pub(crate) mod dispatch;
 pub mod eltwise;
 pub mod graph;
 pub mod model;

@@ -56,7 +56,17 @@ pub fn hamming(a: &Descriptor, b: &Descriptor) -> u32 {
 ///
 /// # Panics
 /// If `(x, y)` is closer than [`HALF_PATCH_SIZE`] to the border.
+///
+/// Runs as x86-64-v3 code where the CPU has it ([`crate::arch::v3`]; the same bits).
 pub fn ic_angle(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
+    crate::arch::v3(
+        #[inline(always)]
+        || ic_angle_body(img, x, y),
+    )
+}
+
+#[inline(always)]
+fn ic_angle_body(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
     let r = HALF_PATCH_SIZE;
     assert!(x >= r && y >= r && x + r < img.width() && y + r < img.height());
     if x + r + 1 < img.width() {
@@ -122,6 +132,7 @@ const IC_V: [[i16; 32]; HALF_PATCH_SIZE + 1] = {
 /// [`ic_angle`] with every row read as 32 fixed columns and the disc applied as weight tables:
 /// the same integer moments, in straight-line lane arithmetic (needs one column of margin
 /// more on the right).
+#[inline(always)]
 fn ic_angle_wide(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
     let r = HALF_PATCH_SIZE;
     // `row` is wide enough by the caller's margin check; a short row reads as zeros rather
@@ -149,6 +160,7 @@ fn ic_angle_wide(img: &ImageView<'_>, x: usize, y: usize) -> f32 {
     angle_deg_of(m01, m10)
 }
 
+#[inline(always)]
 fn angle_deg_of(m01: i32, m10: i32) -> f32 {
     let mut deg = math::atan2f(m01 as f32, m10 as f32) * (180.0 / core::f32::consts::PI);
     if deg < 0.0 {
@@ -166,7 +178,17 @@ fn angle_deg_of(m01: i32, m10: i32) -> f32 {
 /// # Panics
 /// If the rotated pattern leaves the image: keep `(x, y)` at least 19 px (ORB-SLAM2's
 /// `EDGE_THRESHOLD`) from the border.
+///
+/// Runs as x86-64-v3 code where the CPU has it ([`crate::arch::v3`]; the same bits).
 pub fn describe(blurred: &ImageView<'_>, x: usize, y: usize, angle_deg: f32) -> Descriptor {
+    crate::arch::v3(
+        #[inline(always)]
+        || describe_body(blurred, x, y, angle_deg),
+    )
+}
+
+#[inline(always)]
+fn describe_body(blurred: &ImageView<'_>, x: usize, y: usize, angle_deg: f32) -> Descriptor {
     let ang = angle_deg * (core::f32::consts::PI / 180.0);
     // cos/sin in Q16: the rotated coordinates become exact integer arithmetic that vectorises
     // (a float→int cast per point does not: Rust's saturating `as` stays scalar). The Q16

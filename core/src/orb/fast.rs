@@ -39,7 +39,7 @@ pub const CIRCLE: [(i32, i32); 16] = [
 ];
 
 /// True when the 16-bit circular mask `m` has 9 contiguous set bits.
-#[inline]
+#[inline(always)]
 fn has_arc9(m: u32) -> bool {
     let x = m | (m << 16);
     let mut a = x & (x >> 1); // runs of 2
@@ -50,7 +50,7 @@ fn has_arc9(m: u32) -> bool {
 }
 
 /// Largest `max over 9-arcs of (min over the arc of v)` for the circular sequence `v`.
-#[inline]
+#[inline(always)]
 fn best_arc_min(v: &[i16; 16]) -> i16 {
     let mut e = [0i16; 25];
     for (i, x) in e.iter_mut().enumerate() {
@@ -73,7 +73,7 @@ fn best_arc_min(v: &[i16; 16]) -> i16 {
 
 /// FAST score of the pixel at `idx` of `data` given the 16 circle offsets (in bytes), or 0 when it
 /// is not a corner at threshold `t` (`t >= 1`).
-#[inline]
+#[inline(always)]
 fn score_at(data: &[u8], idx: usize, offs: &[isize; 16], t: i16) -> u8 {
     let p = i16::from(data[idx]);
     let mut d = [0i16; 16];
@@ -113,6 +113,7 @@ pub fn corner_score(img: &ImageView<'_>, x: usize, y: usize) -> u8 {
     score_at(img.data(), y * img.stride() + x, &offs, 1)
 }
 
+#[inline(always)]
 fn circle_offsets(stride: usize) -> [isize; 16] {
     let mut o = [0isize; 16];
     for (k, &(dx, dy)) in CIRCLE.iter().enumerate() {
@@ -125,8 +126,24 @@ fn circle_offsets(stride: usize) -> [isize; 16] {
 /// only corners written), calls `on_corner(x)` for each corner, and returns how many it found.
 ///
 /// `flags` is scratch of at least `xs.len()` bytes. Pixels must be at least [`FAST_RADIUS`] from
-/// the border.
+/// the border. Runs as x86-64-v3 code where the CPU has it ([`crate::arch::v3`]; the same bits).
 pub fn score_row(
+    img: &ImageView<'_>,
+    y: usize,
+    xs: core::ops::Range<usize>,
+    t: u8,
+    flags: &mut [u8],
+    scores: &mut ImageViewMut<'_>,
+    on_corner: impl FnMut(usize),
+) -> usize {
+    crate::arch::v3(
+        #[inline(always)]
+        || score_row_body(img, y, xs, t, flags, scores, on_corner),
+    )
+}
+
+#[inline(always)]
+fn score_row_body(
     img: &ImageView<'_>,
     y: usize,
     xs: core::ops::Range<usize>,
@@ -173,6 +190,7 @@ pub fn score_row(
 
 /// Vectorised necessary condition for a FAST-9 corner: writes 1 into `flags[i]` when pixel
 /// `x0 + i` may be a corner at threshold `t`.
+#[inline(always)]
 fn screen_row(img: &ImageView<'_>, y: usize, x0: usize, n: usize, t: u8, flags: &mut [u8]) {
     let row = |dy: i32, dx: i32| -> &[u8] {
         let r = img.row((y as i32 + dy) as usize);

@@ -396,9 +396,17 @@ type GoldenCase = (&'static str, OrbConfig, usize, usize, Vec<u8>, bool, u64);
 
 /// Golden hashes of the extraction output, pinned from the reference implementation: any
 /// optimisation must leave every key point and descriptor bit-identical. A changed hash means a
-/// behaviour change, not a test to update.
+/// behaviour change, not a test to update. Checked on every kernel level this CPU has: the
+/// x86-64-v3 build of the kernels ([`crate::arch`]) and the baseline code.
 #[test]
 fn golden_output_is_unchanged() {
+    crate::nn::dispatch::for_each_level(|level| {
+        println!("kernel level {level}: x86-64-v3 kernels {}", crate::arch::v3_active());
+        golden_output_at_this_level();
+    });
+}
+
+fn golden_output_at_this_level() {
     let cases: Vec<GoldenCase> = vec![
         (
             "textured 640x480 #7",

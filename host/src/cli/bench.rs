@@ -85,6 +85,13 @@ struct BenchReport {
     frames: usize,
     image_size: (u32, u32),
     orb_semloc_1thread: Percentiles,
+    /// The same extractions with the image and ORB kernels capped at baseline x86-64 (SSE2)
+    /// code; only where the CPU has x86-64-v3 (`semloc_core::arch`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    orb_semloc_1thread_baseline_x86_64: Option<Percentiles>,
+    /// Median ORB time, x86-64-v3 kernels over the baseline code, same frames alternating.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    orb_ratio_v3_over_baseline: Option<f64>,
     orb_opencv_1thread: Option<serde_json::Value>,
     orb_ratio_semloc_over_opencv: Option<f64>,
     /// The geometric backbone.
@@ -147,31 +154,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         return Ok(());
     }
 
-    // ORB alone, one thread, left images.
+    // ORB alone, one thread, left images; where the CPU has x86-64-v3, each frame is also
+    // extracted with the kernels capped at the baseline x86-64 code, alternating, and the two
+    // outputs must be the same.
     let orb_lefts = lefts.clone();
-    let orb_ms = std::thread::Builder::new()
+    let (orb_ms, baseline_ms) = std::thread::Builder::new()
         .stack_size(BIG_STACK_BYTES)
-        .spawn(move || -> Result<Vec<f64>> {
-            let mut ex = Box::new(KittiOrbExtractor::new());
-            ex.configure(OrbConfig::KITTI)?;
-            let mut times = Vec::new();
-            for _ in 0..repeat {
-                for img in &orb_lefts {
-                    let view = ImageView::from_slice(
-                        img.as_raw(),
-                        img.width() as usize,
-                        img.height() as usize,
-                    )?;
-                    let t = Instant::now();
-                    ex.extract(&view)?;
-                    times.push(t.elapsed().as_secs_f64() * 1e3);
-                }
-            }
-            Ok(times)
-        })?
+        .spawn(move || orb_times(&orb_lefts, repeat))?
         .join()
         .map_err(|_| anyhow::anyhow!("ORB timing thread panicked"))??;
     let orb = percentiles(&orb_ms);
+    let orb_baseline = (!baseline_ms.is_empty()).then(|| percentiles(&baseline_ms));
 
     let opencv = if args.no_opencv { None } else { opencv_reference(args, &lefts, repeat)? };
     let ratio = opencv.as_ref().and_then(|v| v["median_ms"].as_f64()).map(|cv| orb.median_ms / cv);
@@ -193,7 +186,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let report = BenchReport {
         frames: n,
         image_size: (w, h),
+        orb_ratio_v3_over_baseline: orb_baseline.as_ref().map(|b| orb.median_ms / b.median_ms),
         orb_semloc_1thread: orb,
+        orb_semloc_1thread_baseline_x86_64: orb_baseline,
         orb_opencv_1thread: opencv,
         orb_ratio_semloc_over_opencv: ratio,
         pipeline,
@@ -206,6 +201,52 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+/// ORB extraction times (ms) of `lefts`, `repeat` passes, one thread: at the CPU's best level,
+/// and, where that is x86-64-v3 ([`semloc_core::arch::v3_active`]), capped at the baseline
+/// code right after on the same frame (the order alternates per frame). Fails if the two
+/// extractions differ in any key point or descriptor.
+fn orb_times(lefts: &[GrayImage], repeat: usize) -> Result<(Vec<f64>, Vec<f64>)> {
+    #[cfg(target_arch = "x86_64")]
+    use semloc_core::nn::x86::{set_max_isa, Isa};
+    let mut ex = Box::new(KittiOrbExtractor::new());
+    ex.configure(OrbConfig::KITTI)?;
+    let mut base = Box::new(KittiOrbExtractor::new());
+    base.configure(OrbConfig::KITTI)?;
+    let compare = semloc_core::arch::v3_active();
+    let (mut times, mut base_times) = (Vec::new(), Vec::new());
+    for pass in 0..repeat {
+        for (i, img) in lefts.iter().enumerate() {
+            let view =
+                ImageView::from_slice(img.as_raw(), img.width() as usize, img.height() as usize)?;
+            let baseline_first = compare && (pass + i) % 2 == 1;
+            for run_baseline in [baseline_first, !baseline_first] {
+                if run_baseline && !compare {
+                    continue;
+                }
+                #[cfg(target_arch = "x86_64")]
+                set_max_isa(if run_baseline { Isa::Portable } else { Isa::Avx512Vnni });
+                let (e, out) =
+                    if run_baseline { (&mut base, &mut base_times) } else { (&mut ex, &mut times) };
+                let t = Instant::now();
+                let r = e.extract(&view).map(|_| ());
+                out.push(t.elapsed().as_secs_f64() * 1e3);
+                #[cfg(target_arch = "x86_64")]
+                set_max_isa(Isa::Avx512Vnni);
+                r?;
+            }
+            if compare {
+                let (a, b) = (ex.features(), base.features());
+                if a.keypoints() != b.keypoints() || a.descriptors() != b.descriptors() {
+                    bail!(
+                        "frame {i}: ORB features differ between the x86-64-v3 and baseline kernels"
+                    );
+                }
+            }
+        }
+    }
+    Ok((times, base_times))
 }
 
 /// Times the int8 network and tract's f32 run of its ONNX on the left frames (`repeat` passes),
@@ -454,6 +495,14 @@ fn print_report(r: &BenchReport) {
         "ORB (2000 features, 1 thread): semloc median {:.2} ms, p99 {:.2} ms",
         r.orb_semloc_1thread.median_ms, r.orb_semloc_1thread.p99_ms
     );
+    if let (Some(b), Some(ratio)) =
+        (&r.orb_semloc_1thread_baseline_x86_64, r.orb_ratio_v3_over_baseline)
+    {
+        println!(
+            "ORB kernels capped at baseline x86-64 (SSE2): median {:.2} ms, p99 {:.2} ms -> x86-64-v3/baseline = {ratio:.2}",
+            b.median_ms, b.p99_ms
+        );
+    }
     if let (Some(cv), Some(ratio)) = (&r.orb_opencv_1thread, r.orb_ratio_semloc_over_opencv) {
         println!(
             "ORB reference: OpenCV {} median {:.2} ms, p99 {:.2} ms -> semloc/OpenCV = {ratio:.2}",
