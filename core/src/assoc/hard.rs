@@ -51,10 +51,25 @@ impl FeatureGrid {
     }
 
     pub(crate) fn build(&mut self, features: &[Feature], width: f32, height: f32) {
+        self.build_where(features, width, height, |_| true);
+    }
+
+    /// [`Self::build`] over the features `keep` accepts (by index); each cell keeps them in
+    /// index order, as `build` does.
+    pub(crate) fn build_where(
+        &mut self,
+        features: &[Feature],
+        width: f32,
+        height: f32,
+        keep: impl Fn(usize) -> bool,
+    ) {
         self.inv_cell_w = GRID_COLS as f32 / width;
         self.inv_cell_h = GRID_ROWS as f32 / height;
         let mut count = [0u16; GRID_CELLS];
-        for f in features {
+        for (i, f) in features.iter().enumerate() {
+            if !keep(i) {
+                continue;
+            }
             let (cx, cy) = self.cell_of(f.x, f.y);
             count[cy * GRID_COLS + cx] += 1;
         }
@@ -64,6 +79,9 @@ impl FeatureGrid {
         }
         let mut fill = [0u16; GRID_CELLS];
         for (i, f) in features.iter().enumerate() {
+            if !keep(i) {
+                continue;
+            }
             let (cx, cy) = self.cell_of(f.x, f.y);
             let c = cy * GRID_COLS + cx;
             self.items[usize::from(self.start[c] + fill[c])] = i as u16;

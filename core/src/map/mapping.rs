@@ -288,7 +288,12 @@ impl LocalMap {
             if (c2 - c1).norm() < cam.baseline_m {
                 continue;
             }
-            self.grid.build(&self.map.kf(n).features, self.width, self.height);
+            // Only the features still free can match (a feature matched in this loop is
+            // skipped by `epipolar_match` itself); the rest keep their order in each cell.
+            let kf_n = self.map.kf(n);
+            self.grid.build_where(&kf_n.features, self.width, self.height, |i| {
+                kf_n.landmark[i] == NO_LANDMARK
+            });
             let r21 = t2.rot * t1.rot.transpose();
             for i1 in 0..frame.features.len() {
                 if self.map.kf(slot).landmark[i1] != NO_LANDMARK || self.blocked[i1] {
@@ -400,11 +405,18 @@ impl LocalMap {
         let steps = ((len * (t1 - t0)) / 8.0).clamp(0.0, 399.0) as usize + 1;
         let mut best = (u32::MAX, usize::MAX);
         let mut second = u32::MAX;
+        // Consecutive steps mostly cover the same cells (steps of 8 px, cells of ~19 × 16 px):
+        // a step whose box of cells equals the previous step's has nothing new to visit.
+        let mut prev_box = (usize::MAX, 0, 0, 0);
         for s in 0..=steps {
             let t = t0 + (t1 - t0) * s as f64 / steps as f64;
             let (x, y) = ((lo.0 + dx * t) as f32, (lo.1 + dy * t) as f32);
             let (cx0, cy0) = self.grid.cell_of(x - 8.0, y - 8.0);
             let (cx1, cy1) = self.grid.cell_of(x + 8.0, y + 8.0);
+            if (cx0, cy0, cx1, cy1) == prev_box {
+                continue;
+            }
+            prev_box = (cx0, cy0, cx1, cy1);
             for cy in cy0..=cy1 {
                 for cx in cx0..=cx1 {
                     let c = cy * 64 + cx;
