@@ -51,6 +51,80 @@ pub fn v3_active() -> bool {
     }
 }
 
+/// Shuffle plan of [`resize_rows_h`] for blocks of 8 destination pixels: per block, the first
+/// source index and 16 byte indices (`a0 b0 a1 b1 … a7 b7`, relative to it) of the two taps of
+/// each destination pixel, and its weight pairs `(2048 − w, w)` as `i16`.
+pub(crate) struct ResizePlan<'a> {
+    /// First source index of each block.
+    pub base: &'a mut [u32],
+    /// 16 tap indices per block, relative to its `base`.
+    pub taps: &'a mut [[u8; 16]],
+    /// 16 weights per block (pairs `(2048 − w, w)`).
+    pub weights: &'a mut [[i16; 16]],
+}
+
+/// Plans the vector horizontal pass of the bilinear resize for destination columns with
+/// source indices `x0` and weights `wx` (11-bit) on source rows of `src_w` pixels. Returns the
+/// number of leading 8-pixel blocks the vector pass computes: a block qualifies while its 16
+/// source bytes `base..base + 16` lie in the row and hold both taps of all its pixels (always
+/// for down-scaling by up to ~1.9; the scalar pass does the rest). 0 when [`v3`] would not
+/// run the vector code.
+pub(crate) fn plan_resize_h(x0: &[u32], wx: &[u32], src_w: usize, plan: ResizePlan<'_>) -> usize {
+    if !v3_active() || src_w < 16 {
+        return 0;
+    }
+    let last = src_w - 1;
+    let blocks = (x0.len() / 8).min(plan.base.len()).min(plan.taps.len()).min(plan.weights.len());
+    for b in 0..blocks {
+        let base = x0[8 * b] as usize;
+        if base + 16 > src_w {
+            return b;
+        }
+        for j in 0..8 {
+            let i = x0[8 * b + j] as usize;
+            let i1 = if i < last { i + 1 } else { last };
+            if i < base || i1 - base > 15 {
+                return b;
+            }
+            plan.taps[b][2 * j] = (i - base) as u8;
+            plan.taps[b][2 * j + 1] = (i1 - base) as u8;
+            let w = wx[8 * b + j] as i16;
+            plan.weights[b][2 * j] = 2048 - w;
+            plan.weights[b][2 * j + 1] = w;
+        }
+        plan.base[b] = base as u32;
+    }
+    blocks
+}
+
+/// The horizontal pass of [`crate::image::resize_bilinear`] for the first `blocks` blocks of 8
+/// destination pixels planned by [`plan_resize_h`]: `out[d] = src[x0]·(2048 − w) +
+/// src[x0 + 1]·w`, the same integers as the scalar pass. Does nothing (returns `false`) where
+/// the x86-64-v3 code does not run.
+pub(crate) fn resize_rows_h(
+    src: &[u8],
+    base: &[u32],
+    taps: &[[u8; 16]],
+    weights: &[[i16; 16]],
+    blocks: usize,
+    out: &mut [u32],
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if x86::v3_allowed() {
+        let blocks = blocks.min(base.len()).min(taps.len()).min(weights.len()).min(out.len() / 8);
+        // Every load stays in `src`: checked here once per block (the plan guarantees it).
+        if base[..blocks].iter().all(|&b| b as usize + 16 <= src.len()) {
+            // SAFETY: AVX2 present (`v3_allowed`); the loads read `src[base..base + 16]`,
+            // checked just above, and the stores write `out[8b..8b + 8]` for `b < blocks <=
+            // out.len() / 8`.
+            unsafe { x86::resize_rows_h_avx2(src, base, taps, weights, blocks, out) };
+            return true;
+        }
+    }
+    let _ = (src, base, taps, weights, blocks, out);
+    false
+}
+
 #[cfg(target_arch = "x86_64")]
 mod x86 {
     use core::arch::x86_64::{__cpuid, __cpuid_count};
@@ -101,6 +175,35 @@ mod x86 {
     #[inline]
     pub(super) unsafe fn run_v3<R>(f: impl FnOnce() -> R) -> R {
         f()
+    }
+
+    /// Per block: one 16-byte load at its base, a byte shuffle into `a0 b0 … a7 b7`, widening
+    /// to `i16` and `vpmaddwd` with `(2048 − w, w)`: eight exact `a·(2048 − w) + b·w`.
+    ///
+    /// # Safety
+    /// AVX2 must be present; `base[b] + 16 <= src.len()` and `8·blocks <= out.len()`, with
+    /// `blocks` at most the lengths of `base`, `taps` and `weights`.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn resize_rows_h_avx2(
+        src: &[u8],
+        base: &[u32],
+        taps: &[[u8; 16]],
+        weights: &[[i16; 16]],
+        blocks: usize,
+        out: &mut [u32],
+    ) {
+        use core::arch::x86_64::{
+            __m128i, __m256i, _mm256_cvtepu8_epi16, _mm256_loadu_si256, _mm256_madd_epi16,
+            _mm256_storeu_si256, _mm_loadu_si128, _mm_shuffle_epi8,
+        };
+        let (s, o) = (src.as_ptr(), out.as_mut_ptr());
+        for b in 0..blocks {
+            let v = _mm_loadu_si128(s.add(base[b] as usize).cast::<__m128i>());
+            let t = _mm_loadu_si128(taps[b].as_ptr().cast::<__m128i>());
+            let pairs = _mm256_cvtepu8_epi16(_mm_shuffle_epi8(v, t));
+            let w = _mm256_loadu_si256(weights[b].as_ptr().cast::<__m256i>());
+            _mm256_storeu_si256(o.add(8 * b).cast::<__m256i>(), _mm256_madd_epi16(pairs, w));
+        }
     }
 }
 

@@ -367,13 +367,19 @@ fn resize_coord(d: usize, scale: f64, n: usize) -> (usize, u32) {
 }
 
 /// Row buffers for [`resize_bilinear`] with destinations up to `MAX_W` pixels wide
-/// (`12·MAX_W + 16` bytes).
+/// (`22·MAX_W + 16` bytes), and the byte-shuffle plan of the vector horizontal pass.
 #[derive(Clone, Debug)]
 pub struct ResizeScratch<const MAX_W: usize> {
     x0: [u32; MAX_W],
     wx: [u32; MAX_W],
     rows: [[u32; MAX_W]; 2],
     tags: [usize; 2],
+    /// Per 8-pixel block: first source index (only the first `MAX_W / 8` are used).
+    block_base: [u32; MAX_W],
+    /// Per destination pixel: its two taps relative to its block's base.
+    taps: [[u8; 2]; MAX_W],
+    /// Per destination pixel: `(2048 − w, w)`.
+    weights: [[i16; 2]; MAX_W],
 }
 
 impl<const MAX_W: usize> Default for ResizeScratch<MAX_W> {
@@ -385,14 +391,40 @@ impl<const MAX_W: usize> Default for ResizeScratch<MAX_W> {
 impl<const MAX_W: usize> ResizeScratch<MAX_W> {
     /// Zeroed scratch (`const`, so it can be part of a `static`).
     pub const fn new() -> Self {
-        Self { x0: [0; MAX_W], wx: [0; MAX_W], rows: [[0; MAX_W]; 2], tags: [usize::MAX; 2] }
+        Self {
+            x0: [0; MAX_W],
+            wx: [0; MAX_W],
+            rows: [[0; MAX_W]; 2],
+            tags: [usize::MAX; 2],
+            block_base: [0; MAX_W],
+            taps: [[0; 2]; MAX_W],
+            weights: [[0; 2]; MAX_W],
+        }
     }
 }
 
-/// Horizontal pass for one source row: `out[x] = src[x0]·(2048−w) + src[x0+1]·w`.
+/// The vector pass's plan ([`crate::arch::plan_resize_h`]) and how many 8-pixel blocks it
+/// covers.
+struct RowPlan<'a> {
+    base: &'a [u32],
+    taps: &'a [[u8; 16]],
+    weights: &'a [[i16; 16]],
+    blocks: usize,
+}
+
+/// Horizontal pass for one source row: `out[x] = src[x0]·(2048−w) + src[x0+1]·w`; the
+/// planned blocks by the x86-64-v3 byte-shuffle pass where it runs, the rest here.
 #[inline(always)]
-fn resize_row_h(src: &[u8], x0: &[u32], wx: &[u32], out: &mut [u32]) {
+fn resize_row_h(src: &[u8], x0: &[u32], wx: &[u32], plan: &RowPlan<'_>, out: &mut [u32]) {
     let last = src.len() - 1;
+    let done = if plan.blocks > 0
+        && crate::arch::resize_rows_h(src, plan.base, plan.taps, plan.weights, plan.blocks, out)
+    {
+        8 * plan.blocks
+    } else {
+        0
+    };
+    let (out, x0, wx) = (&mut out[done..], &x0[done..], &wx[done..]);
     for ((o, &i), &w) in out.iter_mut().zip(x0).zip(wx) {
         let i = i as usize;
         let a = u32::from(src[i]);
@@ -440,8 +472,17 @@ fn resize_bilinear_body<const MAX_W: usize>(
         scratch.wx[d] = w;
     }
     scratch.tags = [usize::MAX; 2];
-    let ResizeScratch { x0, wx, rows, tags } = scratch;
+    let ResizeScratch { x0, wx, rows, tags, block_base, taps, weights } = scratch;
     let (x0, wx) = (&x0[..dw], &wx[..dw]);
+    let taps = taps.as_flattened_mut().as_chunks_mut::<16>().0;
+    let weights = weights.as_flattened_mut().as_chunks_mut::<16>().0;
+    let blocks = crate::arch::plan_resize_h(
+        x0,
+        wx,
+        sw,
+        crate::arch::ResizePlan { base: block_base, taps, weights },
+    );
+    let plan = RowPlan { base: block_base, taps, weights, blocks };
     for dy in 0..dh {
         let (r0, wy) = resize_coord(dy, sy, sh);
         let r1 = if r0 + 1 < sh { r0 + 1 } else { r0 };
@@ -452,7 +493,7 @@ fn resize_bilinear_body<const MAX_W: usize>(
             1
         } else {
             let s = if tags[0] == r1 { 1 } else { 0 };
-            resize_row_h(src.row(r0), x0, wx, &mut rows[s][..dw]);
+            resize_row_h(src.row(r0), x0, wx, &plan, &mut rows[s][..dw]);
             tags[s] = r0;
             s
         };
@@ -462,7 +503,7 @@ fn resize_bilinear_body<const MAX_W: usize>(
             1 - s0
         } else {
             let s = 1 - s0;
-            resize_row_h(src.row(r1), x0, wx, &mut rows[s][..dw]);
+            resize_row_h(src.row(r1), x0, wx, &plan, &mut rows[s][..dw]);
             tags[s] = r1;
             s
         };
@@ -696,6 +737,50 @@ mod tests {
         resize_bilinear(&fv, &mut ImageViewMut::from_slice(&mut out2, dw, dh).unwrap(), &mut s)
             .unwrap();
         assert!(out2.iter().all(|&p| p == 200));
+    }
+
+    /// The x86-64-v3 byte-shuffle horizontal pass gives the scalar pass's bytes, for
+    /// down-scaling (the pyramid's 1.2, and up to where blocks no longer fit), up-scaling and
+    /// widths around the 8-pixel blocks and the 16-byte loads.
+    #[test]
+    fn resize_is_the_same_on_every_kernel_level() {
+        let sizes = [
+            (1241usize, 376usize, 1034usize, 313usize),
+            (1034, 313, 862, 261),
+            (100, 40, 83, 33),
+            (60, 36, 50, 30),
+            (301, 20, 160, 11),
+            (301, 20, 151, 10),
+            (64, 9, 33, 5),
+            (17, 5, 14, 4),
+            (15, 5, 12, 4),
+            (40, 12, 97, 29),
+            (1241, 6, 1241, 6),
+        ];
+        let mut s = ResizeScratch::<1300>::new();
+        for (k, &(w, h, dw, dh)) in sizes.iter().enumerate() {
+            let src: Vec<u8> =
+                (0..w * h).map(|i| ((i * 2_654_435_761usize + k) >> 7) as u8).collect();
+            let sv = ImageView::from_slice(&src, w, h).unwrap();
+            let mut outs = Vec::new();
+            crate::nn::dispatch::for_each_level(|level| {
+                let mut out = vec![0u8; dw * dh];
+                resize_bilinear(
+                    &sv,
+                    &mut ImageViewMut::from_slice(&mut out, dw, dh).unwrap(),
+                    &mut s,
+                )
+                .unwrap();
+                outs.push((level, out));
+            });
+            for (level, out) in &outs[1..] {
+                assert!(
+                    out == &outs[0].1,
+                    "{w}x{h} -> {dw}x{dh}: {level} differs from {}",
+                    outs[0].0
+                );
+            }
+        }
     }
 
     #[test]
