@@ -271,16 +271,36 @@ pub fn argmax(logits: &[i8], shape: Shape, labels: &mut [u8]) -> Result<(), Mode
     if labels.len() < n {
         return Err(ModelError::Truncated { need: n, got: labels.len() });
     }
-    for (l, px) in labels.iter_mut().zip(logits.chunks_exact(shape.c)) {
-        let mut best = 0usize;
-        for (c, &v) in px.iter().enumerate().skip(1) {
-            if v > px[best] {
-                best = c;
+    match shape.c {
+        // The deployed networks' class count: the channel loop unrolls.
+        crate::seg::NUM_CLASSES => argmax_pixels::<{ crate::seg::NUM_CLASSES }>(logits, labels),
+        c => {
+            for (l, px) in labels.iter_mut().zip(logits.chunks_exact(c)) {
+                *l = argmax_of(px);
             }
         }
-        *l = best as u8;
     }
     Ok(())
+}
+
+/// [`argmax`] over pixels of `C` channels.
+fn argmax_pixels<const C: usize>(logits: &[i8], labels: &mut [u8]) {
+    let (px, _) = logits.as_chunks::<C>();
+    for (l, px) in labels.iter_mut().zip(px) {
+        *l = argmax_of(px);
+    }
+}
+
+/// The first channel holding the largest value (a running maximum, no branches).
+#[inline(always)]
+fn argmax_of(px: &[i8]) -> u8 {
+    let (mut best, mut best_v) = (0u8, px[0]);
+    for (c, &v) in px.iter().enumerate().skip(1) {
+        let gt = v > best_v;
+        best = if gt { c as u8 } else { best };
+        best_v = if gt { v } else { best_v };
+    }
+    best
 }
 
 /// How a camera frame maps onto the network's static input: a down-scaling by `num / den`
@@ -413,7 +433,20 @@ pub fn prepare_input(src: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<(), M
     for y in 0..h {
         let row = &mut out[y * lb.model_w..(y + 1) * lb.model_w];
         let sy = Span::new(y, num, den, sh);
-        for (x, o) in row[..w].iter_mut().enumerate() {
+        // Halving (the deployed KITTI letterbox): whole 2 × 2 blocks as one vector loop, the
+        // same rounded mean `(sum + 2) / 4` as the general loop below, which does the rest.
+        let mut x_start = 0;
+        if num == 2 && den == 1 && sy.count == 2 {
+            let full = w.min(sw / 2);
+            let (a, b) = (&src[2 * y * sw..][..2 * full], &src[(2 * y + 1) * sw..][..2 * full]);
+            for ((o, a), b) in row[..full].iter_mut().zip(a.chunks_exact(2)).zip(b.chunks_exact(2))
+            {
+                let sum = u16::from(a[0]) + u16::from(a[1]) + u16::from(b[0]) + u16::from(b[1]);
+                *o = ((sum + 2) >> 2) as u8;
+            }
+            x_start = full;
+        }
+        for (x, o) in row[..w].iter_mut().enumerate().skip(x_start) {
             let sx = Span::new(x, num, den, sw);
             let mut sum = 0u32;
             for ky in 0..sy.count {
@@ -454,10 +487,26 @@ pub fn labels_to_frame(labels: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<
         return Err(ModelError::BadIo);
     }
     let at = |s: usize| ((2 * s + 1) * den) / (2 * num);
-    for (y, row) in out[..sw * sh].chunks_exact_mut(sw).enumerate() {
-        let lrow = &labels[at(y) * lb.model_w..];
-        for (x, o) in row.iter_mut().enumerate() {
-            *o = lrow[at(x)];
+    let mut prev: Option<usize> = None;
+    for y in 0..sh {
+        let ly = at(y);
+        if let Some(p) = prev.filter(|&p| at(p) == ly) {
+            // The same label row as the row above: copy it.
+            out.copy_within(p * sw..(p + 1) * sw, y * sw);
+            continue;
+        }
+        prev = Some(y);
+        let lrow = &labels[ly * lb.model_w..];
+        // `at(x)` stepped without a division: the numerator grows by `2·den` per column.
+        let (step, div) = (2 * den, 2 * num);
+        let (mut q, mut r) = (den / div, den % div);
+        for o in out[y * sw..(y + 1) * sw].iter_mut() {
+            *o = lrow[q];
+            r += step;
+            while r >= div {
+                r -= div;
+                q += 1;
+            }
         }
     }
     Ok(())
@@ -722,6 +771,78 @@ mod tests {
         let bad = Letterbox { num: 1, den: 1, ..lb };
         assert_eq!(prepare_input(&src, &bad, &mut inp), Err(ModelError::BadIo));
         assert_eq!(labels_to_frame(&labels, &bad, &mut out), Err(ModelError::BadIo));
+    }
+
+    /// The halving and unrolled fast paths of `prepare_input`, `labels_to_frame` and `argmax`
+    /// give the bytes of their definitions (the general loops they replaced) on every scale
+    /// `fit` picks for a range of frame sizes, odd edges included.
+    #[test]
+    fn letterbox_and_argmax_fast_paths_match_the_definitions() {
+        fn input_reference(src: &[u8], lb: &Letterbox, out: &mut [u8]) {
+            let (sw, sh, num, den) = (lb.src_w, lb.src_h, lb.num, lb.den);
+            let (w, h) = (lb.scaled_w(), lb.scaled_h());
+            for y in 0..lb.model_h {
+                for x in 0..lb.model_w {
+                    let (sx, sy) = (
+                        Span::new(x.min(w - 1), num, den, sw),
+                        Span::new(y.min(h - 1), num, den, sh),
+                    );
+                    let mut sum = 0u32;
+                    for ky in 0..sy.count {
+                        for kx in 0..sx.count {
+                            let v = u32::from(src[(sy.first + ky) * sw + sx.first + kx]);
+                            sum += sy.weight(ky) * sx.weight(kx) * v;
+                        }
+                    }
+                    let n = sx.total * sy.total;
+                    out[y * lb.model_w + x] = ((sum + n / 2) / n) as u8;
+                }
+            }
+        }
+        let mut rng = Rng::new(0x5eed_1e77);
+        for &(sw, sh, mh, mw) in &[
+            (1241usize, 376usize, 192usize, 640usize),
+            (1226, 370, 192, 640),
+            (1242, 375, 192, 640),
+            (1241, 376, 256, 832),
+            (1241, 376, 384, 1248),
+            (480, 360, 384, 480),
+            (7, 5, 4, 6),
+            (9, 7, 4, 5),
+            (20, 10, 5, 10),
+        ] {
+            let lb = Letterbox::fit(sw, sh, mh, mw).unwrap();
+            let src: Vec<u8> = (0..sw * sh).map(|_| rng.usize(0, 256) as u8).collect();
+            let (mut got, mut want) = (vec![0u8; mw * mh], vec![1u8; mw * mh]);
+            prepare_input(&src, &lb, &mut got).unwrap();
+            input_reference(&src, &lb, &mut want);
+            assert!(got == want, "prepare_input {sw}x{sh} -> {mw}x{mh} ({}/{})", lb.num, lb.den);
+            let labels: Vec<u8> = (0..mw * mh).map(|_| rng.usize(0, 256) as u8).collect();
+            let mut out = vec![0u8; sw * sh];
+            labels_to_frame(&labels, &lb, &mut out).unwrap();
+            let at = |s: usize| ((2 * s + 1) * lb.den) / (2 * lb.num);
+            for y in 0..sh {
+                for x in 0..sw {
+                    assert_eq!(
+                        out[y * sw + x],
+                        labels[at(y) * mw + at(x)],
+                        "labels {sw}x{sh} ({x}, {y})"
+                    );
+                }
+            }
+        }
+        for c in [1usize, 2, 5, crate::seg::NUM_CLASSES, 12, 19] {
+            let shape = Shape { c, h: 7, w: 9 };
+            // few distinct values, so ties are common: the first largest channel wins
+            let logits: Vec<i8> = (0..shape.len()).map(|_| rng.int(-2, 2) as i8).collect();
+            let mut labels = vec![0u8; 63];
+            argmax(&logits, shape, &mut labels).unwrap();
+            for (p, px) in logits.chunks_exact(c).enumerate() {
+                let max = *px.iter().max().unwrap();
+                let first = px.iter().position(|&v| v == max).unwrap();
+                assert_eq!(usize::from(labels[p]), first, "argmax c = {c}, pixel {p}");
+            }
+        }
     }
 
     #[test]
