@@ -1,9 +1,9 @@
 //! # arch: the safe scalar kernels, compiled a second time for x86-64-v3
 //!
-//! The hot loops of ORB extraction, the image filters and the descriptor matching are plain safe
-//! Rust written to auto-vectorise. A baseline x86-64 build (a plain `cargo install`, no
-//! `-C target-cpu`) compiles them for SSE2 only: 16-byte vectors, and `count_ones` as a
-//! shift-and-add sequence instead of one `popcnt`. [`v3`] runs a closure compiled with AVX2,
+//! The hot loops of ORB extraction and the image filters (FAST, the pyramid resize, the 7×7
+//! blur, orientation moments, rBRIEF) are plain safe Rust written to auto-vectorise. A baseline
+//! x86-64 build (a plain `cargo install`, no `-C target-cpu`) compiles them for SSE2 only:
+//! 16-byte vectors and no 32-bit lane multiply. [`v3`] runs a closure compiled with AVX2,
 //! POPCNT, BMI1/2 and LZCNT when the CPU has them (probed once with `cpuid`/`xgetbv`, as the
 //! network's kernels are: [`crate::nn::x86`]), and the baseline code otherwise. A kernel opts in
 //! by passing its body as an `#[inline(always)]` closure, the body and the helpers it calls
@@ -51,66 +51,74 @@ pub fn v3_active() -> bool {
     }
 }
 
-/// Shuffle plan of [`resize_rows_h`] for blocks of 8 destination pixels: per block, the first
-/// source index and 16 byte indices (`a0 b0 a1 b1 … a7 b7`, relative to it) of the two taps of
-/// each destination pixel, and its weight pairs `(2048 − w, w)` as `i16`.
+/// Shuffle plan of [`resize_rows_h`] for blocks of 8 destination pixels, made by
+/// [`plan_resize_h`]: per block, the first source index and 16 byte indices (`a0 b0 a1 b1 … a7
+/// b7`, relative to it) of the two taps of each destination pixel, and its weight pairs
+/// `(2048 − w, w)` as `i16`.
+// Only the x86-64 vector pass reads it; elsewhere the plan is always empty.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) struct ResizePlan<'a> {
     /// First source index of each block.
-    pub base: &'a mut [u32],
+    base: &'a [u32],
     /// 16 tap indices per block, relative to its `base`.
-    pub taps: &'a mut [[u8; 16]],
+    taps: &'a [[u8; 16]],
     /// 16 weights per block (pairs `(2048 − w, w)`).
-    pub weights: &'a mut [[i16; 16]],
+    weights: &'a [[i16; 16]],
+    /// How many leading blocks the plan covers.
+    blocks: usize,
 }
 
 /// Plans the vector horizontal pass of the bilinear resize for destination columns with
-/// source indices `x0` and weights `wx` (11-bit) on source rows of `src_w` pixels. Returns the
-/// number of leading 8-pixel blocks the vector pass computes: a block qualifies while its 16
-/// source bytes `base..base + 16` lie in the row and hold both taps of all its pixels (always
-/// for down-scaling by up to ~1.9; the scalar pass does the rest). 0 when [`v3`] would not
-/// run the vector code.
-pub(crate) fn plan_resize_h(x0: &[u32], wx: &[u32], src_w: usize, plan: ResizePlan<'_>) -> usize {
-    if !v3_active() || src_w < 16 {
-        return 0;
-    }
-    let last = src_w - 1;
-    let blocks = (x0.len() / 8).min(plan.base.len()).min(plan.taps.len()).min(plan.weights.len());
-    for b in 0..blocks {
-        let base = x0[8 * b] as usize;
-        if base + 16 > src_w {
-            return b;
-        }
-        for j in 0..8 {
-            let i = x0[8 * b + j] as usize;
-            let i1 = if i < last { i + 1 } else { last };
-            if i < base || i1 - base > 15 {
-                return b;
+/// source indices `x0` and weights `wx` (11-bit) on source rows of `src_w` pixels, in the
+/// caller's storage. The plan covers the leading 8-pixel blocks whose 16 source bytes
+/// `base..base + 16` lie in the row and hold both taps of all its pixels (always for
+/// down-scaling by up to ~1.9; the scalar pass does the rest); none when [`v3`] would not run
+/// the vector code.
+pub(crate) fn plan_resize_h<'a>(
+    x0: &[u32],
+    wx: &[u32],
+    src_w: usize,
+    base: &'a mut [u32],
+    taps: &'a mut [[u8; 16]],
+    weights: &'a mut [[i16; 16]],
+) -> ResizePlan<'a> {
+    let mut blocks = 0;
+    if v3_active() && src_w >= 16 {
+        let last = src_w - 1;
+        let most = (x0.len() / 8).min(base.len()).min(taps.len()).min(weights.len());
+        'blocks: while blocks < most {
+            let b = blocks;
+            let first = x0[8 * b] as usize;
+            if first + 16 > src_w {
+                break;
             }
-            plan.taps[b][2 * j] = (i - base) as u8;
-            plan.taps[b][2 * j + 1] = (i1 - base) as u8;
-            let w = wx[8 * b + j] as i16;
-            plan.weights[b][2 * j] = 2048 - w;
-            plan.weights[b][2 * j + 1] = w;
+            for j in 0..8 {
+                let i = x0[8 * b + j] as usize;
+                let i1 = if i < last { i + 1 } else { last };
+                if i < first || i1 - first > 15 {
+                    break 'blocks;
+                }
+                taps[b][2 * j] = (i - first) as u8;
+                taps[b][2 * j + 1] = (i1 - first) as u8;
+                let w = wx[8 * b + j] as i16;
+                weights[b][2 * j] = 2048 - w;
+                weights[b][2 * j + 1] = w;
+            }
+            base[b] = first as u32;
+            blocks += 1;
         }
-        plan.base[b] = base as u32;
     }
-    blocks
+    ResizePlan { base, taps, weights, blocks }
 }
 
-/// The horizontal pass of [`crate::image::resize_bilinear`] for the first `blocks` blocks of 8
-/// destination pixels planned by [`plan_resize_h`]: `out[d] = src[x0]·(2048 − w) +
-/// src[x0 + 1]·w`, the same integers as the scalar pass. Does nothing (returns `false`) where
-/// the x86-64-v3 code does not run.
-pub(crate) fn resize_rows_h(
-    src: &[u8],
-    base: &[u32],
-    taps: &[[u8; 16]],
-    weights: &[[i16; 16]],
-    blocks: usize,
-    out: &mut [u32],
-) -> bool {
+/// The horizontal pass of [`crate::image::resize_bilinear`] for the destination pixels `plan`
+/// covers: `out[d] = src[x0]·(2048 − w) + src[x0 + 1]·w`, the same integers as the scalar
+/// pass. Returns how many leading pixels of `out` it wrote: 8 per planned block, or 0 where the
+/// x86-64-v3 code does not run.
+pub(crate) fn resize_rows_h(src: &[u8], plan: &ResizePlan<'_>, out: &mut [u32]) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if x86::v3_allowed() {
+    if plan.blocks > 0 && x86::v3_allowed() {
+        let ResizePlan { base, taps, weights, blocks } = *plan;
         let blocks = blocks.min(base.len()).min(taps.len()).min(weights.len()).min(out.len() / 8);
         // Every load stays in `src`: checked here once per block (the plan guarantees it).
         if base[..blocks].iter().all(|&b| b as usize + 16 <= src.len()) {
@@ -118,11 +126,11 @@ pub(crate) fn resize_rows_h(
             // checked just above, and the stores write `out[8b..8b + 8]` for `b < blocks <=
             // out.len() / 8`.
             unsafe { x86::resize_rows_h_avx2(src, base, taps, weights, blocks, out) };
-            return true;
+            return 8 * blocks;
         }
     }
-    let _ = (src, base, taps, weights, blocks, out);
-    false
+    let _ = (src, plan, out);
+    0
 }
 
 #[cfg(target_arch = "x86_64")]

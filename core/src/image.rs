@@ -403,27 +403,18 @@ impl<const MAX_W: usize> ResizeScratch<MAX_W> {
     }
 }
 
-/// The vector pass's plan ([`crate::arch::plan_resize_h`]) and how many 8-pixel blocks it
-/// covers.
-struct RowPlan<'a> {
-    base: &'a [u32],
-    taps: &'a [[u8; 16]],
-    weights: &'a [[i16; 16]],
-    blocks: usize,
-}
-
 /// Horizontal pass for one source row: `out[x] = src[x0]·(2048−w) + src[x0+1]·w`; the
-/// planned blocks by the x86-64-v3 byte-shuffle pass where it runs, the rest here.
+/// pixels `plan` covers by the x86-64-v3 byte-shuffle pass where it runs, the rest here.
 #[inline(always)]
-fn resize_row_h(src: &[u8], x0: &[u32], wx: &[u32], plan: &RowPlan<'_>, out: &mut [u32]) {
+fn resize_row_h(
+    src: &[u8],
+    x0: &[u32],
+    wx: &[u32],
+    plan: &crate::arch::ResizePlan<'_>,
+    out: &mut [u32],
+) {
     let last = src.len() - 1;
-    let done = if plan.blocks > 0
-        && crate::arch::resize_rows_h(src, plan.base, plan.taps, plan.weights, plan.blocks, out)
-    {
-        8 * plan.blocks
-    } else {
-        0
-    };
+    let done = crate::arch::resize_rows_h(src, plan, out);
     let (out, x0, wx) = (&mut out[done..], &x0[done..], &wx[done..]);
     for ((o, &i), &w) in out.iter_mut().zip(x0).zip(wx) {
         let i = i as usize;
@@ -476,13 +467,7 @@ fn resize_bilinear_body<const MAX_W: usize>(
     let (x0, wx) = (&x0[..dw], &wx[..dw]);
     let taps = taps.as_flattened_mut().as_chunks_mut::<16>().0;
     let weights = weights.as_flattened_mut().as_chunks_mut::<16>().0;
-    let blocks = crate::arch::plan_resize_h(
-        x0,
-        wx,
-        sw,
-        crate::arch::ResizePlan { base: block_base, taps, weights },
-    );
-    let plan = RowPlan { base: block_base, taps, weights, blocks };
+    let plan = crate::arch::plan_resize_h(x0, wx, sw, block_base, taps, weights);
     for dy in 0..dh {
         let (r0, wy) = resize_coord(dy, sy, sh);
         let r1 = if r0 + 1 < sh { r0 + 1 } else { r0 };

@@ -487,15 +487,16 @@ pub fn labels_to_frame(labels: &[u8], lb: &Letterbox, out: &mut [u8]) -> Result<
         return Err(ModelError::BadIo);
     }
     let at = |s: usize| ((2 * s + 1) * den) / (2 * num);
-    let mut prev: Option<usize> = None;
+    // The last frame row filled from the label map, and its label row.
+    let mut prev: Option<(usize, usize)> = None;
     for y in 0..sh {
         let ly = at(y);
-        if let Some(p) = prev.filter(|&p| at(p) == ly) {
+        if let Some((p, _)) = prev.filter(|&(_, lp)| lp == ly) {
             // The same label row as the row above: copy it.
             out.copy_within(p * sw..(p + 1) * sw, y * sw);
             continue;
         }
-        prev = Some(y);
+        prev = Some((y, ly));
         let lrow = &labels[ly * lb.model_w..];
         // `at(x)` stepped without a division: the numerator grows by `2·den` per column.
         let (step, div) = (2 * den, 2 * num);
