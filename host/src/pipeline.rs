@@ -344,10 +344,17 @@ struct NextLeft {
     labels: Option<GrayImage>,
     seg_ms: f64,
     orb_left_ms: f64,
-    load_ms: f64,
     /// The right extraction, when this thread took it: (load, ORB) ms.
     right: Option<Result<(f64, f64), PipelineError>>,
-    /// Since the frame started.
+}
+
+/// What the second thread did for the next frame, failed or not: its wall time counts towards
+/// the frame's compute time either way.
+struct Ahead {
+    next: Result<NextLeft, PipelineError>,
+    /// Decoding (left image and dataset labels) on that thread.
+    load_ms: f64,
+    /// Since the frame started, when the thread finished or failed.
     end_ms: f64,
 }
 
@@ -755,35 +762,40 @@ fn overlapped<S: FrameSource + ?Sized>(
     let slot = &right_slot;
     let (tx, rx) = std::sync::mpsc::channel::<LeftExtraction<'_>>();
     // Frame j's labels and left features (the second thread).
-    let next_left = move || -> Result<NextLeft, PipelineError> {
-        let t = Instant::now();
-        let left = src.left(j)?.into_owned();
-        let mut load_ms = ms(t);
-        let t = Instant::now();
-        let (labels, seg_ms) = match (scheme, segmenter) {
-            (None, _) => (None, 0.0),
-            (Some(_), Some(seg)) => {
-                let l = segment(seg, &left, j)?;
-                (Some(l), ms(t))
+    let next_left = move || -> Ahead {
+        let mut load_ms = 0.0;
+        let work = || -> Result<NextLeft, PipelineError> {
+            let t = Instant::now();
+            let left = src.left(j)?.into_owned();
+            load_ms += ms(t);
+            let t = Instant::now();
+            let (labels, seg_ms) = match (scheme, segmenter) {
+                (None, _) => (None, 0.0),
+                (Some(_), Some(seg)) => {
+                    let l = segment(seg, &left, j)?;
+                    (Some(l), ms(t))
+                }
+                (Some(_), None) => {
+                    let l = src.labels(j)?.into_owned();
+                    load_ms += ms(t);
+                    (Some(l), 0.0)
+                }
+            };
+            // The extractors are free once frame i is matched.
+            let mut ex =
+                rx.recv().map_err(|_| PipelineError::Worker(format!("frame {i} not matched")))?;
+            let err = |err| PipelineError::Frame { frame: j, err };
+            let t = Instant::now();
+            if let Some(l) = &labels {
+                view(l).and_then(|v| ex.set_labels(&v)).map_err(err)?;
             }
-            (Some(_), None) => {
-                let l = src.labels(j)?.into_owned();
-                load_ms += ms(t);
-                (Some(l), 0.0)
-            }
+            view(&left).and_then(|v| ex.run(&v)).map_err(err)?;
+            let orb_left_ms = ms(t);
+            let right = take_right(slot, src, j);
+            Ok(NextLeft { left, labels, seg_ms, orb_left_ms, right })
         };
-        // The extractors are free once frame i is matched.
-        let mut ex =
-            rx.recv().map_err(|_| PipelineError::Worker(format!("frame {i} not matched")))?;
-        let err = |err| PipelineError::Frame { frame: j, err };
-        let t = Instant::now();
-        if let Some(l) = &labels {
-            view(l).and_then(|v| ex.set_labels(&v)).map_err(err)?;
-        }
-        view(&left).and_then(|v| ex.run(&v)).map_err(err)?;
-        let orb_left_ms = ms(t);
-        let right = take_right(slot, src, j);
-        Ok(NextLeft { left, labels, seg_ms, orb_left_ms, load_ms, right, end_ms: ms(t0) })
+        let next = work();
+        Ahead { next, load_ms, end_ms: ms(t0) }
     };
     std::thread::scope(move |s| {
         let h = s.spawn(next_left);
@@ -820,18 +832,21 @@ fn overlapped<S: FrameSource + ?Sized>(
             Some(Ok((load, _))) => *load,
             _ => 0.0,
         };
-        let mut critical_ms = end_here - load_here;
-        let next = there.ok().and_then(|nl| {
-            // Exactly one thread took the right extraction; its decoding is not compute.
-            let (right, right_load_there) = match (right_here, nl.right) {
-                (Some(r), None) => (r.ok()?, 0.0),
-                (None, Some(r)) => {
-                    let r = r.ok()?;
-                    (r, r.0)
-                }
+        // The slower thread's wall time less its decoding, whether its work succeeded or not
+        // (failed work ahead is made again in turn by the next frame, but it took this
+        // frame's time).
+        let right_load_there = match there.next.as_ref().map(|nl| &nl.right) {
+            Ok(Some(Ok((load, _)))) => *load,
+            _ => 0.0,
+        };
+        let critical_ms =
+            (end_here - load_here).max(there.end_ms - there.load_ms - right_load_there);
+        let next = there.next.ok().and_then(|nl| {
+            // Exactly one thread took the right extraction.
+            let right = match (right_here, nl.right) {
+                (Some(r), None) | (None, Some(r)) => r.ok()?,
                 _ => return None,
             };
-            critical_ms = critical_ms.max(nl.end_ms - nl.load_ms - right_load_there);
             let frame = InExtractors {
                 left: nl.left,
                 labels: nl.labels,
