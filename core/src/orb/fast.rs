@@ -9,7 +9,9 @@
 //!
 //! Speed: a row is screened with a vectorised necessary condition (for one polarity, every
 //! antipodal pair of circle pixels must contain a pixel of that polarity, since any 9-arc covers
-//! one of each pair); only survivors get the exact scalar test and score.
+//! one of each pair). Blocks of 32 pixels holding a survivor are then scored whole, vectorised
+//! across the pixels (about 6 % of a KITTI frame's pixels pass the screen at `t = 20` and 4 % are
+//! corners, so most survivors need their score anyway); the row's tail, pixel by pixel.
 //!
 //! Memory: the caller provides the score map (one byte per pixel) and a row of flags.
 
@@ -138,11 +140,12 @@ pub fn score_row(
 ) -> usize {
     crate::arch::v3(
         #[inline(always)]
-        || score_row_body(img, y, xs, t, flags, scores, on_corner),
+        || score_row_body(img, y, xs, t, flags, scores, on_corner, BLOCK_SCORING),
     )
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn score_row_body(
     img: &ImageView<'_>,
     y: usize,
@@ -151,6 +154,7 @@ fn score_row_body(
     flags: &mut [u8],
     scores: &mut ImageViewMut<'_>,
     mut on_corner: impl FnMut(usize),
+    blocks: bool,
 ) -> usize {
     let (x0, x1) = (xs.start, xs.end);
     if x1 <= x0 {
@@ -165,18 +169,34 @@ fn score_row_body(
     let data = img.data();
     let base = y * img.stride() + x0;
     let out = &mut scores.row_mut(y)[x0..x1];
+    let t16 = i16::from(t);
     let mut found = 0;
     let mut i = 0;
-    while i < n {
-        if i + 8 <= n {
-            let w = &flags[i..i + 8];
-            if u64::from_ne_bytes([w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]]) == 0 {
-                i += 8;
-                continue;
-            }
+    // Whole blocks of LANES pixels with a screened pixel are scored all at once (every lane,
+    // vectorised; a score below `t` means "not a corner at t"); the tail pixel by pixel.
+    while blocks && i + LANES <= n {
+        let w = &flags[i..i + LANES];
+        if w.iter().fold(0u8, |a, &f| a | f) == 0 {
+            i += LANES;
+            continue;
         }
+        let s = score_lanes(img, y, x0 + i);
+        let mut mask = 0u32;
+        for (l, &v) in s.iter().enumerate() {
+            mask |= u32::from(v >= t) << l;
+        }
+        while mask != 0 {
+            let l = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            out[i + l] = s[l];
+            found += 1;
+            on_corner(x0 + i + l);
+        }
+        i += LANES;
+    }
+    while i < n {
         if flags[i] != 0 {
-            let s = score_at(data, base + i, &offs, i16::from(t));
+            let s = score_at(data, base + i, &offs, t16);
             if s != 0 {
                 out[i] = s;
                 found += 1;
@@ -186,6 +206,57 @@ fn score_row_body(
         i += 1;
     }
     found
+}
+
+/// Pixels scored at once by [`score_lanes`] (one 256-bit vector of bytes).
+const LANES: usize = 32;
+
+/// Whether whole blocks are scored at once: on targets with byte vectors (x86-64, AArch64
+/// NEON). Without them (Cortex-M4) scoring all 32 pixels of a block would cost more than
+/// scoring its few survivors one by one; the scores are the same either way.
+const BLOCK_SCORING: bool = cfg!(any(target_arch = "x86_64", target_arch = "aarch64"));
+
+/// FAST scores of the [`LANES`] pixels from `(x, y)`, as [`score_at`] at threshold 1 gives
+/// them, but 0 only where the pixel is no corner even at 1 (so a score `>= t` is a corner at
+/// `t` with that score, and a score `< t` is none). Per lane: the 9-arc minimum of the
+/// saturated differences for each polarity (circular runs of 2, 4, 8, then 9 by halving), the
+/// larger over arcs and polarities, less one. Written lane by lane over fixed arrays, which
+/// vectorises across the lanes.
+#[inline(always)]
+fn score_lanes(img: &ImageView<'_>, y: usize, x: usize) -> [u8; LANES] {
+    let row = |dy: i32, dx: i32| -> &[u8] {
+        let r = img.row((y as i32 + dy) as usize);
+        let s = (x as i32 + dx) as usize;
+        &r[s..s + LANES]
+    };
+    let p = |k: usize| row(CIRCLE[k].1, CIRCLE[k].0);
+    let c = row(0, 0);
+    let (p0, p1, p2, p3, p4, p5, p6, p7) = (p(0), p(1), p(2), p(3), p(4), p(5), p(6), p(7));
+    let (p8, p9, p10, p11, p12, p13, p14, p15) =
+        (p(8), p(9), p(10), p(11), p(12), p(13), p(14), p(15));
+    #[inline(always)]
+    fn best_arc(x: [u8; 16]) -> u8 {
+        let m2: [u8; 16] = core::array::from_fn(|k| x[k].min(x[(k + 1) & 15]));
+        let m4: [u8; 16] = core::array::from_fn(|k| m2[k].min(m2[(k + 2) & 15]));
+        let m8: [u8; 16] = core::array::from_fn(|k| m4[k].min(m4[(k + 4) & 15]));
+        let mut best = 0u8;
+        for k in 0..16 {
+            best = best.max(m8[k].min(x[(k + 8) & 15]));
+        }
+        best
+    }
+    let mut out = [0u8; LANES];
+    for (l, o) in out.iter_mut().enumerate() {
+        let v = c[l];
+        let q = [
+            p0[l], p1[l], p2[l], p3[l], p4[l], p5[l], p6[l], p7[l], p8[l], p9[l], p10[l], p11[l],
+            p12[l], p13[l], p14[l], p15[l],
+        ];
+        let bright = best_arc(q.map(|a| a.saturating_sub(v)));
+        let dark = best_arc(q.map(|a| v.saturating_sub(a)));
+        *o = bright.max(dark).saturating_sub(1);
+    }
+    out
 }
 
 /// Vectorised necessary condition for a FAST-9 corner: writes 1 into `flags[i]` when pixel
@@ -344,6 +415,41 @@ mod tests {
                     let expect = if n >= t { n } else { 0 };
                     assert_eq!(sc[y * w + x], expect, "t={t} ({x},{y})");
                     assert_eq!(corner_score(&view, x, y), n);
+                }
+            }
+        }
+    }
+
+    /// Rows wide enough for several whole blocks, ranges that start and end anywhere, blocks
+    /// scored at once or pixel by pixel: the same scores as the definition, and `on_corner`
+    /// called once per corner, in order.
+    #[test]
+    fn blocks_and_tails_agree_with_the_definition() {
+        let (w, h) = (150usize, 9usize);
+        let img = noise(w, h, 0x0bad_cafe);
+        let view = ImageView::from_slice(&img, w, h).unwrap();
+        let y = 4;
+        for (x0, x1, blocks) in [(3, w - 3), (5, 69), (3, 35), (40, 72), (10, 11)]
+            .into_iter()
+            .flat_map(|(a, b)| [(a, b, true), (a, b, false)])
+        {
+            for t in [1u8, 7, 20] {
+                let mut sc = vec![0u8; w * h];
+                let mut flags = vec![0u8; w];
+                let mut called = Vec::new();
+                let mut sm = ImageViewMut::from_slice(&mut sc, w, h).unwrap();
+                let on = |x| called.push(x);
+                let n = score_row_body(&view, y, x0..x1, t, &mut flags, &mut sm, on, blocks);
+                let want: Vec<usize> =
+                    (x0..x1).filter(|&x| naive_score(&img, w, x, y) >= t).collect();
+                if x1 - x0 > 100 {
+                    assert!(want.len() > 5, "the noise row has corners at t={t}");
+                }
+                assert_eq!(called, want, "x in {x0}..{x1}, t={t}");
+                assert_eq!(n, want.len());
+                for x in 0..w {
+                    let expect = if want.contains(&x) { naive_score(&img, w, x, y) } else { 0 };
+                    assert_eq!(sc[y * w + x], expect, "({x},{y}) in {x0}..{x1}, t={t}");
                 }
             }
         }
