@@ -1,7 +1,7 @@
 //! # arch: the safe scalar kernels, compiled a second time for x86-64-v3
 //!
-//! The hot loops of ORB extraction and the image filters (FAST, the pyramid resize, the 7×7
-//! blur, orientation moments, rBRIEF) are plain safe Rust written to auto-vectorise. A baseline
+//! The hot loops of ORB extraction and the image filters (FAST scoring and non-maximum
+//! suppression, the pyramid resize, the 7×7 blur, orientation moments, rBRIEF) are plain safe Rust written to auto-vectorise. A baseline
 //! x86-64 build (a plain `cargo install`, no `-C target-cpu`) compiles them for SSE2 only:
 //! 16-byte vectors and no 32-bit lane multiply. [`v3`] runs a closure compiled with AVX2,
 //! POPCNT, BMI1/2 and LZCNT when the CPU has them (probed once with `cpuid`/`xgetbv`, as the

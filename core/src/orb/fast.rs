@@ -216,9 +216,9 @@ const LANES: usize = 32;
 /// scoring its few survivors one by one; the scores are the same either way.
 const BLOCK_SCORING: bool = cfg!(any(target_arch = "x86_64", target_arch = "aarch64"));
 
-/// FAST scores of the [`LANES`] pixels from `(x, y)`, as [`score_at`] at threshold 1 gives
-/// them, but 0 only where the pixel is no corner even at 1 (so a score `>= t` is a corner at
-/// `t` with that score, and a score `< t` is none). Per lane: the 9-arc minimum of the
+/// FAST scores of the [`LANES`] pixels from `(x, y)`, the same as [`score_at`] gives at
+/// threshold 1 (0 where a pixel is no corner even at 1), so a score `>= t` is a corner at `t`
+/// with that score and a score `< t` is none. Per lane: the 9-arc minimum of the
 /// saturated differences for each polarity (circular runs of 2, 4, 8, then 9 by halving), the
 /// larger over arcs and polarities, less one. Written lane by lane over fixed arrays, which
 /// vectorises across the lanes.
