@@ -317,7 +317,6 @@ struct Prefetch {
     left: GrayImage,
     labels: GrayImage,
     seg_ms: f64,
-    load_ms: f64,
 }
 
 /// A frame extracted ahead of its turn: the localiser's extractors and labels hold its
@@ -552,14 +551,22 @@ impl Pipeline {
             _ => {
                 // Stagewise (or nothing ahead to do): the next frame's labels beside tracking.
                 let next_seg = next.filter(|_| use_net);
-                let seg_work = |seg: Option<&mut Segmenter>| -> Option<Prefetch> {
-                    let (Some(j), Some(seg)) = (next_seg, seg) else { return None };
+                // The prefetch (dropped if it fails) and its decoding time, failed or not.
+                let seg_work = |seg: Option<&mut Segmenter>| -> (Option<Prefetch>, f64) {
+                    let (Some(j), Some(seg)) = (next_seg, seg) else { return (None, 0.0) };
                     let t = Instant::now();
-                    let img = src.left(j).ok()?.into_owned();
+                    let img = src.left(j);
                     let load_ms = ms(t);
+                    let Ok(img) = img else { return (None, load_ms) };
+                    let img = img.into_owned();
                     let t = Instant::now();
-                    let labels = segment(seg, &img, j).ok()?;
-                    Some(Prefetch { index: j, left: img, labels, seg_ms: ms(t), load_ms })
+                    let pre = segment(seg, &img, j).ok().map(|labels| Prefetch {
+                        index: j,
+                        left: img,
+                        labels,
+                        seg_ms: ms(t),
+                    });
+                    (pre, load_ms)
                 };
                 let track = |loc: &mut Localiser| -> Result<_, PipelineError> {
                     let t = Instant::now();
@@ -579,13 +586,13 @@ impl Pipeline {
                     })
                 } else {
                     let tracked = track(loc);
-                    let pre = if tracked.is_ok() { seg_work(segmenter.as_mut()) } else { None };
+                    let pre =
+                        if tracked.is_ok() { seg_work(segmenter.as_mut()) } else { (None, 0.0) };
                     (tracked, Ok(pre))
                 };
-                let pre =
+                let (pre, next_load_ms) =
                     pre.map_err(|_| PipelineError::Worker("segmentation worker panicked".into()))?;
                 (stereo, stereo_ms, report, track_ms, culled) = tracked?;
-                let next_load_ms = pre.as_ref().map_or(0.0, |p| p.load_ms);
                 compute_ms = (ms(t0) - this.load_ms - next_load_ms).max(0.0);
                 self.prefetched = pre;
             }
