@@ -772,9 +772,11 @@ fn overlapped<S: FrameSource + ?Sized>(
     let next_left = move || -> Ahead {
         let mut load_ms = 0.0;
         let work = || -> Result<NextLeft, PipelineError> {
+            // Decoding counts as loading whether it succeeds or not.
             let t = Instant::now();
-            let left = src.left(j)?.into_owned();
+            let left = src.left(j);
             load_ms += ms(t);
+            let left = left?.into_owned();
             let t = Instant::now();
             let (labels, seg_ms) = match (scheme, segmenter) {
                 (None, _) => (None, 0.0),
@@ -783,9 +785,9 @@ fn overlapped<S: FrameSource + ?Sized>(
                     (Some(l), ms(t))
                 }
                 (Some(_), None) => {
-                    let l = src.labels(j)?.into_owned();
+                    let l = src.labels(j);
                     load_ms += ms(t);
-                    (Some(l), 0.0)
+                    (Some(l?.into_owned()), 0.0)
                 }
             };
             // The extractors are free once frame i is matched.
