@@ -6,7 +6,10 @@
 //!
 //! Two rows in the same run: 15 keyframes optimised and 9 fixed (the default,
 //! `tracker.ba_keyframes = 15`) and 20 optimised and 4 fixed (`ba_keyframes = 20`); the second's
-//! time is read as a ratio to the first.
+//! time is read as a ratio to the first. On x86-64 a third row runs the default window with the
+//! instruction set capped at the baseline (`set_max_isa(Portable)`: SSE2 only), the reference
+//! for the reduced system and back-substitution that run through `arch::v3` (AVX2 lanes, the
+//! same bits).
 
 // `criterion_group!` expands to an undocumented `pub fn`.
 #![allow(missing_docs)]
@@ -99,9 +102,18 @@ fn bench(c: &mut Criterion) {
     let mut backup = vec![Vector3::zeros(); w.points.len()];
     let mut group = c.benchmark_group("local_ba");
     group.sample_size(20);
-    for optimised in [15usize, 20] {
+    #[cfg(target_arch = "x86_64")]
+    let rows = [(15usize, ""), (20, ""), (15, "_baseline_isa")];
+    #[cfg(not(target_arch = "x86_64"))]
+    let rows = [(15usize, ""), (20, "")];
+    for (optimised, tag) in rows {
         let fixed = KEYFRAMES - optimised;
-        group.bench_function(format!("{optimised}_optimised_{fixed}_fixed"), |b| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use semloc_core::nn::x86::{set_max_isa, Isa};
+            set_max_isa(if tag.is_empty() { Isa::Avx512Vnni } else { Isa::Portable });
+        }
+        group.bench_function(format!("{optimised}_optimised_{fixed}_fixed{tag}"), |b| {
             b.iter(|| {
                 let mut poses = w.poses.clone();
                 let mut points = w.points.clone();

@@ -152,6 +152,50 @@ fn bundle_adjustment_converges_from_perturbed_window() {
 }
 
 #[test]
+fn bundle_adjustment_is_the_same_bits_at_every_instruction_set_level() {
+    // The reduced system and the back-substitution run through `arch::v3`: noisy measurements
+    // and perturbed starts, three iterations, and every pose and point must carry the same bits
+    // at every level this CPU has (the baseline build's included).
+    let mut rng = Rng::new(0x0bad_cafe_f00d_0001);
+    let cam = kitti_cam();
+    let (truth, pts_true, mut obs) = forward_window(&mut rng, &cam, 150, 1);
+    for o in &mut obs {
+        o.z.u += rng.signed() * 0.7;
+        o.z.v += rng.signed() * 0.7;
+        o.z.ur += rng.signed() * 0.7;
+    }
+    let start: Vec<Se3> =
+        truth.iter().map(|t| t.retract(&(pose(&mut rng, 0.004, 0.08).log()))).collect();
+    let pts0: Vec<Vector3<f64>> = pts_true
+        .iter()
+        .map(|p| p + Vector3::new(rng.signed(), rng.signed(), rng.signed()) * 0.1)
+        .collect();
+    let mut runs = Vec::new();
+    crate::nn::dispatch::for_each_level(|level| {
+        let (mut poses, mut pts) = (start.clone(), pts0.clone());
+        let mut backup = vec![Vector3::zeros(); pts.len()];
+        let mut scratch = Box::new(BaScratch::new());
+        let params = BaParams { iterations: 3, robust: true };
+        let rep =
+            bundle_adjust(&cam, &mut poses, 2, &mut pts, &obs, &mut backup, &mut scratch, &params)
+                .unwrap();
+        let bits: Vec<u64> = poses
+            .iter()
+            .flat_map(|p| p.rot.iter().chain(p.trans.iter()).copied().collect::<Vec<_>>())
+            .chain(pts.iter().flat_map(|p| p.iter().copied().collect::<Vec<_>>()))
+            .chain([rep.initial_cost, rep.final_cost])
+            .map(f64::to_bits)
+            .collect();
+        runs.push((level, bits, poses[4].trans != start[4].trans));
+    });
+    assert!(!runs.is_empty());
+    for (level, bits, moved) in &runs {
+        assert!(*moved, "{level}: the optimised poses did not move");
+        assert_eq!(bits, &runs[0].1, "{level} differs from {}", runs[0].0);
+    }
+}
+
+#[test]
 fn bundle_adjustment_rejects_malformed_problems() {
     let cam = kitti_cam();
     let mut poses = vec![Se3::identity(); 2];
