@@ -549,6 +549,7 @@ fn groups(obs: &[BaObs]) -> impl Iterator<Item = (u32, usize, usize)> + '_ {
 /// The damped point block `H_ll` and gradient `b_l` of one point; `None` if not invertible.
 /// `terms[i]`, where `terms` is long enough, receives observation `i`'s linear terms (`None`
 /// where it is unusable) for the caller to reuse: linearising is most of the work.
+#[inline(always)]
 fn point_block(
     cam: &StereoCamera,
     poses: &[Se3],
