@@ -39,6 +39,18 @@ pub(crate) fn v3<R>(f: impl FnOnce() -> R) -> R {
     f()
 }
 
+/// `v` clamped to `0.0..=max` (NaN as 0) and truncated: Rust's saturating float-to-integer
+/// conversion, which does not vectorise, replaced by a plain truncation that cannot overflow
+/// once clamped. `max` outside `0.0..=2e9` (or NaN) is taken as 0.
+#[inline(always)]
+pub(crate) fn trunc_clamped(v: f32, max: f32) -> i32 {
+    let max = if (0.0..=2.0e9).contains(&max) { max } else { 0.0 };
+    // `f32::max` returns the other argument when one is NaN: `c` is finite, in 0..=max.
+    let c = v.max(0.0).min(max);
+    // SAFETY: `c` is finite and in `0.0..=2e9`, so its truncation is representable in `i32`.
+    unsafe { c.to_int_unchecked::<i32>() }
+}
+
 /// Whether [`v3`] runs its closure compiled for x86-64-v3 on this thread now.
 pub fn v3_active() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -228,6 +240,39 @@ mod tests {
         crate::nn::dispatch::for_each_level(|level| seen.push((level, super::v3_active())));
         for (level, active) in seen {
             assert_eq!(active, all && level != "portable", "level {level}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod trunc_tests {
+    #[test]
+    fn trunc_clamped_is_the_clamped_saturating_conversion() {
+        let vals = [
+            f32::NAN,
+            f32::NEG_INFINITY,
+            -1e30,
+            -1.5,
+            -0.0,
+            0.0,
+            0.999,
+            1.0,
+            62.99,
+            63.0,
+            63.5,
+            1e9,
+            3e9,
+            f32::INFINITY,
+        ];
+        for max in [0.0f32, 23.0, 63.0, 1.5e9] {
+            for &v in &vals {
+                let want = (v as i64).clamp(0, max as i64) as i32;
+                assert_eq!(super::trunc_clamped(v, max), want, "v {v} max {max}");
+            }
+        }
+        // Out-of-range or NaN bounds are taken as 0, never a conversion that overflows.
+        for max in [f32::NAN, -1.0, 3e9, f32::INFINITY] {
+            assert_eq!(super::trunc_clamped(1e30, max), 0, "max {max}");
         }
     }
 }

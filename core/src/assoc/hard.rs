@@ -27,6 +27,14 @@ pub(crate) const LN_SCALE: f64 = 0.182_321_556_793_954_6;
 
 /// Features of one frame bucketed by image cell (counting sort, no allocation). Also used by
 /// local mapping over keyframe features.
+/// The grid coordinate of `v` (pixels) with cells `1 / inv` wide: the truncated `v · inv`
+/// clamped to `0..=n − 1`, NaN as 0. Clamped before the conversion (the same cell: truncation
+/// is monotonic), which then vectorises ([`crate::arch::trunc_clamped`]).
+#[inline(always)]
+fn cell_coord(v: f32, inv: f32, n: usize) -> usize {
+    crate::arch::trunc_clamped(v * inv, (n - 1) as f32) as usize
+}
+
 pub(crate) struct FeatureGrid {
     start: [u16; GRID_CELLS + 1],
     items: [u16; FRAME_CAPACITY],
@@ -45,9 +53,42 @@ impl FeatureGrid {
     }
 
     pub(crate) fn cell_of(&self, x: f32, y: f32) -> (usize, usize) {
-        let cx = (x * self.inv_cell_w) as isize;
-        let cy = (y * self.inv_cell_h) as isize;
-        (cx.clamp(0, GRID_COLS as isize - 1) as usize, cy.clamp(0, GRID_ROWS as isize - 1) as usize)
+        (cell_coord(x, self.inv_cell_w, GRID_COLS), cell_coord(y, self.inv_cell_h, GRID_ROWS))
+    }
+
+    /// The boxes of cells `cell_of(x − r, y − r) ..= cell_of(x + r, y + r)` around the points
+    /// of a walk along a segment: step `s` of `out.len()` is at `t = t0 + (t1 − t0)·s / steps`,
+    /// `(x, y) = ((lo.0 + d.0·t) as f32, (lo.1 + d.1·t) as f32)`. Each box is packed as
+    /// `cx0 | cy0 << 8 | cx1 << 16 | cy1 << 24`. All steps are computed in one loop that
+    /// vectorises (through [`crate::arch::v3`]); the values are those of one `cell_of` pair
+    /// per step.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn boxes_along(
+        &self,
+        lo: (f64, f64),
+        d: (f64, f64),
+        t0: f64,
+        t1: f64,
+        steps: usize,
+        r: f32,
+        out: &mut [u32],
+    ) {
+        let (iw, ih) = (self.inv_cell_w, self.inv_cell_h);
+        let n = out.len().min(i32::MAX as usize) as i32;
+        crate::arch::v3(
+            #[inline(always)]
+            || {
+                for s in 0..n {
+                    let t = t0 + (t1 - t0) * f64::from(s) / steps as f64;
+                    let (x, y) = ((lo.0 + d.0 * t) as f32, (lo.1 + d.1 * t) as f32);
+                    let cx0 = cell_coord(x - r, iw, GRID_COLS) as u32;
+                    let cy0 = cell_coord(y - r, ih, GRID_ROWS) as u32;
+                    let cx1 = cell_coord(x + r, iw, GRID_COLS) as u32;
+                    let cy1 = cell_coord(y + r, ih, GRID_ROWS) as u32;
+                    out[s as usize] = cx0 | cy0 << 8 | cx1 << 16 | cy1 << 24;
+                }
+            },
+        );
     }
 
     pub(crate) fn build(&mut self, features: &[Feature], width: f32, height: f32) {
@@ -259,6 +300,57 @@ impl LmView {
             ref_level: l.ref_level,
             ref_dist_m: l.ref_dist_m,
             alive: l.alive,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn boxes_along_match_cell_of_at_every_step() {
+        // Segments of every direction and length, partly outside the image, on a KITTI-sized
+        // grid and an odd one: the packed boxes equal the per-step `cell_of` pairs, at every
+        // instruction-set level.
+        let mut rng = crate::testing::Rng::new(0xce11_b0c5);
+        for (w, h) in [(1241.0f32, 376.0f32), (333.0, 1001.0)] {
+            let mut grid = FeatureGrid::new();
+            grid.build(&[], w, h);
+            for _ in 0..300 {
+                let lo = (rng.range(-200.0, 1500.0), rng.range(-200.0, 1200.0));
+                let d = (rng.signed() * 1500.0, rng.signed() * 900.0);
+                let (t0, t1) = (rng.range(0.0, 0.5), rng.range(0.5, 1.0));
+                let steps = rng.below(400) + 1;
+                let want: std::vec::Vec<u32> = (0..=steps)
+                    .map(|s| {
+                        let t = t0 + (t1 - t0) * s as f64 / steps as f64;
+                        let (x, y) = ((lo.0 + d.0 * t) as f32, (lo.1 + d.1 * t) as f32);
+                        let (cx0, cy0) = grid.cell_of(x - 8.0, y - 8.0);
+                        let (cx1, cy1) = grid.cell_of(x + 8.0, y + 8.0);
+                        u32::from_le_bytes([cx0, cy0, cx1, cy1].map(|v| v as u8))
+                    })
+                    .collect();
+                crate::nn::dispatch::for_each_level(|level| {
+                    let mut got = [u32::MAX; 401];
+                    grid.boxes_along(lo, d, t0, t1, steps, 8.0, &mut got[..=steps]);
+                    assert_eq!(&got[..=steps], &want[..], "{level}: {lo:?} {d:?} {steps}");
+                });
+            }
+        }
+    }
+
+    #[test]
+    fn cell_of_clamps_like_a_wide_conversion() {
+        let mut grid = FeatureGrid::new();
+        grid.build(&[], 1241.0, 376.0);
+        for (x, y) in [(-1e30f32, 1e30f32), (f32::NAN, -0.5), (0.99 * 1241.0 / 64.0, 375.999)] {
+            let wide =
+                |v: f32, inv: f32, n: usize| ((v * inv) as isize).clamp(0, n as isize - 1) as usize;
+            assert_eq!(
+                grid.cell_of(x, y),
+                (wide(x, grid.inv_cell_w, GRID_COLS), wide(y, grid.inv_cell_h, GRID_ROWS))
+            );
         }
     }
 }

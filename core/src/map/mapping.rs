@@ -407,16 +407,16 @@ impl LocalMap {
         let mut second = u32::MAX;
         // Consecutive steps mostly cover the same cells (steps of 8 px, cells of ~19 × 16 px):
         // a step whose box of cells equals the previous step's has nothing new to visit.
-        let mut prev_box = (usize::MAX, 0, 0, 0);
-        for s in 0..=steps {
-            let t = t0 + (t1 - t0) * s as f64 / steps as f64;
-            let (x, y) = ((lo.0 + dx * t) as f32, (lo.1 + dy * t) as f32);
-            let (cx0, cy0) = self.grid.cell_of(x - 8.0, y - 8.0);
-            let (cx1, cy1) = self.grid.cell_of(x + 8.0, y + 8.0);
-            if (cx0, cy0, cx1, cy1) == prev_box {
+        // The boxes of all steps first, in one vectorised pass (packed, see `boxes_along`).
+        let mut boxes = [0u32; 400 + 1];
+        self.grid.boxes_along(lo, (dx, dy), t0, t1, steps, 8.0, &mut boxes[..=steps]);
+        let mut prev_box = u32::MAX;
+        for &b in &boxes[..=steps] {
+            if b == prev_box {
                 continue;
             }
-            prev_box = (cx0, cy0, cx1, cy1);
+            prev_box = b;
+            let [cx0, cy0, cx1, cy1] = b.to_le_bytes().map(usize::from);
             for cy in cy0..=cy1 {
                 for cx in cx0..=cx1 {
                     let c = cy * 64 + cx;
