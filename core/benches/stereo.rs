@@ -4,7 +4,9 @@
 //! The right image is the left one shifted by a disparity that grows down the frame (5 px at
 //! the top to 51 px at the bottom, like a road plane), so matches exist at every row. The ORB
 //! extraction of both images is done once, outside the timed loop; its time is printed as the
-//! reference the matcher's time is a fraction of (measured in the same run).
+//! reference the matcher's time is a fraction of (measured in the same run). On x86-64 a
+//! second matcher row runs with the instruction set capped at the baseline (SSE2 only,
+//! `set_max_isa(Portable)`): the reference for the SAD refinement that runs through `arch::v3`.
 
 // `criterion_group!` expands to an undocumented `pub fn`.
 #![allow(missing_docs)]
@@ -95,6 +97,30 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    #[cfg(target_arch = "x86_64")]
+    {
+        use semloc_core::nn::x86::{set_max_isa, Isa};
+        set_max_isa(Isa::Portable);
+        c.bench_function(&format!("stereo_match_{W}x{H}_synthetic_baseline_isa"), |b| {
+            b.iter(|| {
+                black_box(
+                    matcher
+                        .match_frame(
+                            el.features(),
+                            el.pyramid(),
+                            er.features(),
+                            er.pyramid(),
+                            black_box(&params),
+                            0.0,
+                            &mut out,
+                        )
+                        .expect("match")
+                        .matched,
+                )
+            })
+        });
+        set_max_isa(Isa::Avx512Vnni);
+    }
     c.bench_function(&format!("orb_extract_{W}x{H}_reference"), |b| {
         b.iter(|| black_box(el.extract(black_box(&lv)).expect("extract").len()))
     });

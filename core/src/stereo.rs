@@ -90,6 +90,13 @@ pub const MAX_SAD_SEARCH: i32 = 32;
 
 const MAX_PATCH: usize = (2 * MAX_SAD_HALF_WINDOW + 1) * (2 * MAX_SAD_HALF_WINDOW + 1);
 const MAX_DISTS: usize = 2 * MAX_SAD_SEARCH as usize + 1;
+/// Shifts whose SADs [`sad_refine`] accumulates at once.
+const SAD_LANES: usize = 16;
+/// [`MAX_DISTS`] rounded up to whole blocks of [`SAD_LANES`].
+const MAX_DISTS_PADDED: usize = MAX_DISTS.div_ceil(SAD_LANES) * SAD_LANES;
+/// The padded copy of the right window's rows: `2w + 1` rows of `MAX_DISTS_PADDED + 2w` bytes.
+const SAD_ROWS_BYTES: usize =
+    (2 * MAX_SAD_HALF_WINDOW + 1) * (MAX_DISTS_PADDED + 2 * MAX_SAD_HALF_WINDOW);
 
 /// Stereo calibration and matching parameters (ORB-SLAM2: `Camera.bf`, `mb`, and constants).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -303,6 +310,8 @@ pub struct StereoMatcher<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_E
     entries: [u16; MAX_ENTRIES],
     /// (SAD distance, left index) of the refined matches.
     matches: [(u32, u16); MAX_KP],
+    /// [`sad_refine`]'s padded copy of the right window's rows.
+    sad_rows: [u8; SAD_ROWS_BYTES],
 }
 
 /// Row-entry capacity of [`KittiStereoMatcher`]: 16 rows for each of 2048 key points, the most
@@ -352,6 +361,7 @@ impl<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize>
             cursor: [0; MAX_ROWS],
             entries: [0; MAX_ENTRIES],
             matches: [(0, 0); MAX_KP],
+            sad_rows: [0; SAD_ROWS_BYTES],
         }
     }
 
@@ -434,6 +444,7 @@ impl<const MAX_KP: usize, const MAX_ROWS: usize, const MAX_ENTRIES: usize>
                 kr.x,
                 params.sad_half_window,
                 params.sad_search,
+                &mut self.sad_rows,
             );
             match refined {
                 Err(Reject::Window) => stats.rejected_window += 1,
@@ -649,6 +660,7 @@ fn sad_refine(
     u_r0: f32,
     half_window: usize,
     search: i32,
+    rows: &mut [u8; SAD_ROWS_BYTES],
 ) -> Result<(f32, u32), Reject> {
     let w = half_window.min(MAX_SAD_HALF_WINDOW) as i64;
     let big_l = i64::from(search.clamp(1, MAX_SAD_SEARCH));
@@ -683,20 +695,49 @@ fn sad_refine(
             *p = i32::from(s) - centre_l;
         }
     }
-    let mut dists = [0u32; MAX_DISTS];
+    // The SAD of every shift `inc` in `-L..=L` (index `k = inc + L`), accumulated for
+    // `SAD_LANES` shifts at a time: for each patch pixel, one pass over the lanes reads a
+    // contiguous run of the right row, which vectorises (through `arch::v3`). The rows are
+    // copied into a zero-padded buffer so every run is a whole block; lanes past the last shift
+    // are computed and ignored (`rows` is the caller's buffer, so the padding holds whatever
+    // an earlier call left there). Integer sums: any order gives the same values.
+    let n_inc = (2 * big_l + 1) as usize;
+    let blocks = n_inc.div_ceil(SAD_LANES);
+    let stride = blocks * SAD_LANES + side - 1;
+    let x0_r = (su_r0 - big_l - w) as usize;
+    for (dy, dst) in rows.chunks_exact_mut(stride).take(side).enumerate() {
+        dst[..n_inc + side - 1].copy_from_slice(&img_r.row(y0 + dy)[x0_r..][..n_inc + side - 1]);
+    }
+    let mut centre_r = [0i32; MAX_DISTS_PADDED];
+    let centre_row = &img_r.row(sv_l as usize)[x0_r + side / 2..][..n_inc];
+    for (c, &s) in centre_r.iter_mut().zip(centre_row) {
+        *c = i32::from(s);
+    }
+    let mut dists = [0u32; MAX_DISTS_PADDED];
+    crate::arch::v3(
+        #[inline(always)]
+        || {
+            for b in 0..blocks {
+                let o = b * SAD_LANES;
+                let c: [i32; SAD_LANES] = centre_r[o..o + SAD_LANES].try_into().unwrap_or_default();
+                let mut acc = [0u32; SAD_LANES];
+                for (dy, prow) in patch.chunks_exact(side).take(side).enumerate() {
+                    let row = &rows[dy * stride + o..];
+                    for (dx, &p) in prow.iter().enumerate() {
+                        let run: [u8; SAD_LANES] =
+                            row[dx..dx + SAD_LANES].try_into().unwrap_or_default();
+                        for l in 0..SAD_LANES {
+                            acc[l] += (i32::from(run[l]) - c[l] - p).unsigned_abs();
+                        }
+                    }
+                }
+                dists[o..o + SAD_LANES].copy_from_slice(&acc);
+            }
+        },
+    );
     let mut best = (u32::MAX, 0i64);
     for inc in -big_l..=big_l {
-        let cx = (su_r0 + inc) as usize;
-        let centre_r = i32::from(img_r.row(sv_l as usize)[cx]);
-        let x0_r = cx - w as usize;
-        let mut dist = 0u32;
-        for (dy, prow) in patch.chunks_exact(side).take(side).enumerate() {
-            let src = &img_r.row(y0 + dy)[x0_r..x0_r + side];
-            for (&p, &s) in prow.iter().zip(src) {
-                dist += (i32::from(s) - centre_r - p).unsigned_abs();
-            }
-        }
-        dists[(inc + big_l) as usize] = dist;
+        let dist = dists[(inc + big_l) as usize];
         if dist < best.0 {
             best = (dist, inc);
         }

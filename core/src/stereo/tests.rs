@@ -316,7 +316,9 @@ fn sad_window_outside_the_image_is_rejected() {
     pl.build(&ImageView::from_slice(&l, W, H).unwrap(), 1.2, 8).unwrap();
     pr.build(&ImageView::from_slice(&r, W, H).unwrap(), 1.2, 8).unwrap();
     let (il, ir, info) = (pl.level(0), pr.level(0), pl.info(0));
-    let refine = |u: f32, v: f32, ur: f32| sad_refine(&il, &ir, &info, u, v, ur, 5, 5);
+    let refine = |u: f32, v: f32, ur: f32| {
+        sad_refine(&il, &ir, &info, u, v, ur, 5, 5, &mut [0; SAD_ROWS_BYTES])
+    };
     assert_eq!(refine(100.0, 3.0, 80.0), Err(Reject::Window));
     assert_eq!(refine(100.0, H as f32 - 3.0, 80.0), Err(Reject::Window));
     assert_eq!(refine(30.0, 100.0, 8.0), Err(Reject::Window));
@@ -326,6 +328,75 @@ fn sad_window_outside_the_image_is_rejected() {
     // The true match refines to 80 ± 0.5 px.
     let (ur, _) = refine(100.0, 100.0, 81.0).unwrap();
     assert!((ur - 80.0).abs() <= 0.5, "{ur}");
+}
+
+#[test]
+fn sad_refine_equals_the_per_shift_definition() {
+    // The refinement accumulates all shifts at once; the definition sums each shift's window
+    // in turn. Random positions, windows and search ranges on three pyramid levels, at every
+    // instruction-set level: same best distance, same refined u_R bits, same rejections.
+    let (l, r) = pair(11, |y| 12 + y % 9);
+    let mut pl = Box::new(Pyramid::<W, PYR>::new());
+    let mut pr = Box::new(Pyramid::<W, PYR>::new());
+    pl.build(&ImageView::from_slice(&l, W, H).unwrap(), 1.2, 8).unwrap();
+    pr.build(&ImageView::from_slice(&r, W, H).unwrap(), 1.2, 8).unwrap();
+    let definition = |lv: usize, u_l: f32, v_l: f32, u_r0: f32, hw: usize, search: i32| {
+        let (il, ir, info) = (pl.level(lv), pr.level(lv), pl.info(lv));
+        let (w, big_l) = (hw as i64, i64::from(search));
+        let px = |x: f32| math::roundf(x * info.inv_scale) as i64;
+        let (su_l, sv_l, su_r0) = (px(u_l), px(v_l), px(u_r0));
+        let (wd, ht) = (il.width() as i64, il.height() as i64);
+        if sv_l - w < 0
+            || sv_l + w >= ht
+            || su_l - w < 0
+            || su_l + w >= wd
+            || su_r0 - big_l - w < 0
+            || su_r0 + big_l + w >= wd
+        {
+            return Err(Reject::Window);
+        }
+        let at = |img: &ImageView<'_>, x: i64, y: i64| i64::from(img.row(y as usize)[x as usize]);
+        let cl = at(&il, su_l, sv_l);
+        let mut dists = Vec::new();
+        for inc in -big_l..=big_l {
+            let cr = at(&ir, su_r0 + inc, sv_l);
+            let mut d = 0i64;
+            for dy in -w..=w {
+                for dx in -w..=w {
+                    let pl_ = at(&il, su_l + dx, sv_l + dy) - cl;
+                    d += (at(&ir, su_r0 + inc + dx, sv_l + dy) - cr - pl_).abs();
+                }
+            }
+            dists.push(d as u32);
+        }
+        let k = (0..dists.len()).min_by_key(|&k| (dists[k], k)).unwrap();
+        if k == 0 || k == dists.len() - 1 {
+            return Err(Reject::Border);
+        }
+        let (d1, d2, d3) = (dists[k - 1] as f32, dists[k] as f32, dists[k + 1] as f32);
+        let delta = parabola_offset(d1, d2, d3).ok_or(Reject::Parabola)?;
+        Ok((info.scale * (su_r0 as f32 + (k as i64 - big_l) as f32 + delta), dists[k]))
+    };
+    let mut rng = testing::Rng::new(0x5ad_5ad);
+    let mut refined = 0;
+    for _ in 0..400 {
+        let lv = rng.below(3);
+        let (hw, search) = (rng.below(8) + 1, rng.below(12) as i32 + 1);
+        let u_l = rng.range(-5.0, W as f64 + 5.0) as f32;
+        let v_l = rng.range(-5.0, H as f64 + 5.0) as f32;
+        let u_r0 = u_l - rng.range(5.0, 30.0) as f32;
+        let want = definition(lv, u_l, v_l, u_r0, hw, search);
+        refined += usize::from(want.is_ok());
+        crate::nn::dispatch::for_each_level(|isa| {
+            let (il, ir, info) = (pl.level(lv), pr.level(lv), pl.info(lv));
+            // Garbage in the padding must not matter.
+            let mut rows = [0xa5u8; SAD_ROWS_BYTES];
+            let got = sad_refine(&il, &ir, &info, u_l, v_l, u_r0, hw, search, &mut rows);
+            let bits = |x: &Result<(f32, u32), Reject>| x.map(|(u, d)| (u.to_bits(), d));
+            assert_eq!(bits(&got), bits(&want), "{isa}: level {lv} ({u_l}, {v_l}) -> {u_r0}");
+        });
+    }
+    assert!(refined > 100, "only {refined} of 400 refined");
 }
 
 #[test]
