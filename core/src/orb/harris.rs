@@ -150,8 +150,8 @@ mod tests {
         assert_eq!(harris_response(&fv, 16, 16), 0.0);
     }
 
-    /// The exact integer numerator by the definition (3 × 3 Sobel, 7 × 7 sums).
-    fn reference(img: &[u8], w: usize, x: usize, y: usize) -> i64 {
+    /// The definition's sums `(ΣIx², ΣIy², ΣIxIy)` (3 × 3 Sobel, 7 × 7 block), exact.
+    fn sums(img: &[u8], w: usize, x: usize, y: usize) -> (i64, i64, i64) {
         let p = |x: usize, y: usize| i64::from(img[y * w + x]);
         let (mut a, mut b, mut c) = (0i64, 0i64, 0i64);
         for yy in y - 3..=y + 3 {
@@ -169,6 +169,12 @@ mod tests {
                 c += ix * iy;
             }
         }
+        (a, b, c)
+    }
+
+    /// The exact integer numerator by the definition.
+    fn reference(img: &[u8], w: usize, x: usize, y: usize) -> i64 {
+        let (a, b, c) = sums(img, w, x, y);
         25 * (a * b - c * c) - (a + b) * (a + b)
     }
 
@@ -198,23 +204,8 @@ mod tests {
         let img = image(w, h, |x, y| ((x * 31 + y * 17 + x * y) % 256) as u8);
         let v = ImageView::from_slice(&img, w, h).unwrap();
         let (x, y) = (9usize, 10usize);
-        let (mut a, mut b, mut c) = (0f64, 0f64, 0f64);
-        let p = |x: usize, y: usize| img[y * w + x] as f64;
-        for yy in y - 3..=y + 3 {
-            for xx in x - 3..=x + 3 {
-                let ix = (p(xx + 1, yy) - p(xx - 1, yy)) * 2.0 + p(xx + 1, yy - 1)
-                    - p(xx - 1, yy - 1)
-                    + p(xx + 1, yy + 1)
-                    - p(xx - 1, yy + 1);
-                let iy = (p(xx, yy + 1) - p(xx, yy - 1)) * 2.0 + p(xx - 1, yy + 1)
-                    - p(xx - 1, yy - 1)
-                    + p(xx + 1, yy + 1)
-                    - p(xx + 1, yy - 1);
-                a += ix * ix;
-                b += iy * iy;
-                c += ix * iy;
-            }
-        }
+        let (a, b, c) = sums(&img, w, x, y);
+        let (a, b, c) = (a as f64, b as f64, c as f64);
         let s = 1.0 / (4.0 * 7.0 * 255.0);
         let r = (a * b - c * c - 0.04 * (a + b) * (a + b)) * s * s * s * s;
         let got = harris_response(&v, x, y) as f64;
