@@ -441,7 +441,10 @@ pub fn bundle_adjust(
     let mut lambda = 1e-4;
     for _ in 0..params.iterations {
         report.iterations += 1;
-        build_reduced(cam, poses, fixed, points, obs, scratch, params, lambda);
+        crate::arch::v3(
+            #[inline(always)]
+            || build_reduced(cam, poses, fixed, points, obs, scratch, params, lambda),
+        );
         let ok = {
             let (s, g) = (scratch.s.as_mut_slice(), scratch.g.as_mut_slice());
             dim == 0 || cholesky_solve_in_place(s, NP, dim, g)
@@ -458,7 +461,11 @@ pub fn bundle_adjust(
             poses[fixed + k] = poses[fixed + k].retract(&d);
         }
         let step_norm2 = scratch.g.rows(0, dim).norm_squared();
-        back_substitute(cam, &pose_backup, fixed, points, obs, scratch, params, lambda);
+        // Through `v3` like `build_reduced`: the same bits, wider lanes.
+        crate::arch::v3(
+            #[inline(always)]
+            || back_substitute(cam, &pose_backup, fixed, points, obs, scratch, params, lambda),
+        );
         let new_cost = total_cost(cam, poses, points, obs, params);
         if new_cost < cost {
             cost = new_cost;
@@ -582,29 +589,12 @@ fn point_block(
     Some((inv, bl))
 }
 
-/// Builds the damped reduced camera system `S δp = g` into `scratch`. The body runs through
+/// Builds the damped reduced camera system `S δp = g` into `scratch`. Called through
 /// [`crate::arch::v3`]: the Schur products ([`product_block`]) are its hot loop, and AVX2's four
 /// `f64` lanes take them without changing a bit (no FMA, no reassociation).
 #[allow(clippy::too_many_arguments)]
-fn build_reduced(
-    cam: &StereoCamera,
-    poses: &[Se3],
-    fixed: usize,
-    points: &[Vector3<f64>],
-    obs: &[BaObs],
-    scratch: &mut BaScratch,
-    params: &BaParams,
-    lambda: f64,
-) {
-    crate::arch::v3(
-        #[inline(always)]
-        || build_reduced_body(cam, poses, fixed, points, obs, scratch, params, lambda),
-    );
-}
-
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn build_reduced_body(
+fn build_reduced(
     cam: &StereoCamera,
     poses: &[Se3],
     fixed: usize,
@@ -716,26 +706,8 @@ fn product_block<const SUB: bool>(
 /// Point update after the pose step: `δl = H_ll⁻¹ (b_l − H_lp δp)`, linearised at the old
 /// poses (`old_poses`), with the solved pose steps in `scratch.g`.
 #[allow(clippy::too_many_arguments)]
-fn back_substitute(
-    cam: &StereoCamera,
-    old_poses: &[Se3],
-    fixed: usize,
-    points: &mut [Vector3<f64>],
-    obs: &[BaObs],
-    scratch: &BaScratch,
-    params: &BaParams,
-    lambda: f64,
-) {
-    // Through `v3` like `build_reduced`: the same bits, wider lanes.
-    crate::arch::v3(
-        #[inline(always)]
-        || back_substitute_body(cam, old_poses, fixed, points, obs, scratch, params, lambda),
-    );
-}
-
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn back_substitute_body(
+fn back_substitute(
     cam: &StereoCamera,
     old_poses: &[Se3],
     fixed: usize,
