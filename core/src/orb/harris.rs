@@ -46,8 +46,7 @@ pub fn harris_numerator(img: &ImageView<'_>, x: usize, y: usize) -> i64 {
                 .unwrap_or([0; 10])
         });
         let (a, b, c) = crate::arch::harris_sums(&rows);
-        let (a, b, c) = (i64::from(a), i64::from(b), i64::from(c));
-        return 25 * (a * b - c * c) - (a + b) * (a + b);
+        return numerator_of_sums(a, b, c);
     }
     #[cfg(not(target_arch = "x86_64"))]
     if xs + 10 <= img.width() {
@@ -73,8 +72,7 @@ pub fn harris_numerator(img: &ImageView<'_>, x: usize, y: usize) -> i64 {
         up = mid;
         mid = dn;
     }
-    let (a, b, c) = (i64::from(a), i64::from(b), i64::from(c));
-    25 * (a * b - c * c) - (a + b) * (a + b)
+    numerator_of_sums(a, b, c)
 }
 
 /// [`harris_numerator`] on 8 lanes of `i16` derivatives (the eighth masked to 0), from rows of
@@ -110,11 +108,14 @@ fn numerator_wide(img: &ImageView<'_>, xs: usize, y: usize) -> i64 {
         }
         (h0, s0, h1, s1) = (h1, s1, h2, s2);
     }
-    let (a, b, c) = (
-        i64::from(aa.iter().sum::<i32>()),
-        i64::from(bb.iter().sum::<i32>()),
-        i64::from(cc.iter().sum::<i32>()),
-    );
+    numerator_of_sums(aa.iter().sum(), bb.iter().sum(), cc.iter().sum())
+}
+
+/// `25(ab − c²) − (a + b)²` from the block sums `a = ΣIx²`, `b = ΣIy²`, `c = ΣIxIy`, exact in
+/// `i64`.
+#[inline(always)]
+fn numerator_of_sums(a: i32, b: i32, c: i32) -> i64 {
+    let (a, b, c) = (i64::from(a), i64::from(b), i64::from(c));
     25 * (a * b - c * c) - (a + b) * (a + b)
 }
 
