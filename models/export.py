@@ -37,6 +37,9 @@ def load_model(checkpoint=None, variant=None, final_upsample=True):
     if checkpoint:
         ck = torch.load(checkpoint, map_location="cpu")
         variant = ck["variant"]
+        if variant not in ("res2net", "bottleneck"):
+            raise SystemExit(f"{checkpoint}: a {variant} checkpoint (the distillation teacher); "
+                             "only the Fast-SCNN variants res2net and bottleneck export")
         model = build(variant, final_upsample=final_upsample)
         model.load_state_dict(ck["model"])
     else:

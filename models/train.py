@@ -23,7 +23,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import camvid  # noqa: E402
-from semloc_models import IGNORE_INDEX, NUM_CLASSES, build, count_params  # noqa: E402
+from semloc_models import IGNORE_INDEX, NUM_CLASSES, VARIANTS, build, count_params  # noqa: E402
 
 
 def parse_hw(s):
@@ -33,7 +33,8 @@ def parse_hw(s):
 
 def get_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--variant", choices=["res2net", "bottleneck"], default="res2net")
+    p.add_argument("--variant", choices=list(VARIANTS), default="res2net",
+                   help="resunet: the larger distillation teacher (semloc_models/teacher.py), never exported")
     p.add_argument("--epochs", type=int, default=200)
     p.add_argument("--max-iters", type=int, default=0, help="stop after this many iterations (smoke runs)")
     p.add_argument("--time-budget", type=float, default=0,
@@ -83,6 +84,11 @@ def get_args(argv=None):
                    "batches first, so that a BN-folded network (onnx_to_checkpoint.py) trains with "
                    "normalised activations and gives the same outputs in eval mode")
     p.add_argument("--renorm-batches", type=int, default=20)
+    p.add_argument("--teacher", nargs="+", default=[], metavar="CKPT",
+                   help="distil from these checkpoints (their mean softmax at --kd-temp) on every "
+                   "training crop, void pixels included: loss = (1 - a) CE(labels) + a T^2 KL(teacher || student)")
+    p.add_argument("--kd-alpha", type=float, default=0.5, metavar="A")
+    p.add_argument("--kd-temp", type=float, default=2.0, metavar="T")
     return p.parse_args(argv)
 
 
@@ -156,6 +162,17 @@ def classmix(x, y, gen, p):
         x[i] = torch.where(m.unsqueeze(0), src_x[i], x[i])
         y[i] = torch.where(m, src_y[i], y[i])
     return x, y
+
+
+def distill_loss(logits, teachers, x, a):
+    """T^2 KL(p_teacher || p_student) at temperature T, summed over classes, mean over every pixel
+    (void too: the teacher has an opinion where the annotators gave none). Several teachers: the
+    mean of their softmaxes."""
+    temp = a.kd_temp
+    with torch.no_grad(), torch.autocast("cuda", dtype=torch.bfloat16, enabled=x.device.type == "cuda"):
+        p = sum(F.softmax(t(x).float() / temp, 1) for t in teachers) / len(teachers)
+    logq = F.log_softmax(logits.float() / temp, 1)
+    return temp * temp * (p * (torch.log(p.clamp_min(1e-8)) - logq)).sum(1).mean()
 
 
 def seed_all(seed):
@@ -242,6 +259,14 @@ def main(argv=None):
               f"(largest eval-mode output change {err:.2e})", flush=True)
         if not err < 1e-2:
             raise SystemExit(f"--init {a.init}: re-estimating BatchNorm changed the outputs by {err:.3g}")
+    teachers = []
+    for path in a.teacher:
+        t = torch.load(path, map_location="cpu")
+        tm = build(t.get("variant", a.variant))
+        tm.load_state_dict(t["model"])
+        teachers.append(tm.to(device).eval().requires_grad_(False))
+        print(f"teacher {path}: {t.get('variant')} selected at epoch {t.get('epoch')}, "
+              f"mIoU {t.get('metrics', {}).get('miou', float('nan')) * 100:.2f}", flush=True)
     nparams = count_params(model)
     print(f"variant={a.variant} params={nparams:,} device={device} train={len(train_ds)} val={len(val_ds)}",
           flush=True)
@@ -300,6 +325,8 @@ def main(argv=None):
                 loss = F.cross_entropy(logits.float(), y, weight=weight, ignore_index=IGNORE_INDEX)
             else:  # all-void crop: no gradient (plain CE would be 0/0 = NaN)
                 loss = logits.float().sum() * 0.0
+            if teachers:
+                loss = (1.0 - a.kd_alpha) * loss + a.kd_alpha * distill_loss(logits, teachers, x, a)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

@@ -287,7 +287,15 @@ def fold_bn(model):
     return model
 
 
+VARIANTS = ("res2net", "bottleneck", "resunet")
+
+
 def build(variant, **kw):
+    """'res2net' / 'bottleneck': the deployable Fast-SCNN; 'resunet': the distillation teacher."""
+    if variant == "resunet":
+        from .teacher import ResUNet
+
+        return ResUNet(**kw)
     return FastSCNN(gfe_block=variant, **kw)
 
 
