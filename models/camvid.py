@@ -119,6 +119,8 @@ class CamVid(torch.utils.data.Dataset):
     `crop` (h, w) (padding with void / edge where the scaled image is smaller), horizontal flip,
     brightness/contrast/gamma jitter, Gaussian noise. All randomness comes from a per-sample
     generator seeded with (seed, epoch, index), so runs are reproducible for any worker count.
+    The epoch must reach the DataLoader's worker processes, which hold copies of the dataset made
+    when they started: train with `EpochSampler`, whose indices carry it.
     """
 
     def __init__(self, split, root=DEFAULT_ROOT, crop=(384, 384), augment=None, limit=None,
@@ -151,9 +153,12 @@ class CamVid(torch.utils.data.Dataset):
         return pair
 
     def __getitem__(self, i):
+        epoch = self.epoch
+        if isinstance(i, tuple):  # from EpochSampler: (epoch, index)
+            epoch, i = i
         img, lab = self._load(i)
         if self.augment:
-            rng = random.Random((self.seed * 1_000_003 + self.epoch) * 10_007 + i)
+            rng = random.Random((self.seed * 1_000_003 + epoch) * 10_007 + i)
             img, lab = self._augment(img, lab, rng)
         else:
             img, lab = pad_to_multiple(img, lab)
@@ -200,6 +205,21 @@ class CamVid(torch.utils.data.Dataset):
         # back to u8 levels, as the engine only ever sees u8 luma
         img = np.clip(np.round(f * 255.0), 0, 255)
         return img, lab
+
+
+class EpochSampler(torch.utils.data.RandomSampler):
+    """The DataLoader's shuffle (torch's RandomSampler, the same order from the same generator)
+    with the dataset's current epoch in every index: it yields (epoch, i).
+
+    `CamVid.set_epoch` changes the main process's copy of the dataset only. DataLoader workers,
+    persistent ones above all, keep the copy they were started with, so with `--workers` > 0 every
+    epoch used to get epoch 0's augmentation: the same crop, scale, flip and noise of each image,
+    every epoch. The sampler runs in the main process, so its indices carry the right epoch."""
+
+    def __iter__(self):
+        epoch = self.data_source.epoch
+        for i in super().__iter__():
+            yield (epoch, i)
 
 
 def _blur(f, rng):

@@ -235,8 +235,12 @@ def main(argv=None):
     seen_val_ds = camvid.CamVid("val", a.data) if a.holdout_seq else None
     g = torch.Generator()
     g.manual_seed(a.seed)
+    # EpochSampler: the shuffle of shuffle=True, with the epoch carried to the workers' copies of
+    # the dataset (without it, every epoch after the first repeated the first one's augmentation
+    # whenever --workers > 0: every lent-GPU run before 2026-12-04).
     train_dl = torch.utils.data.DataLoader(
-        train_ds, batch_size=a.batch, shuffle=True, drop_last=len(train_ds) >= a.batch,
+        train_ds, batch_size=a.batch, sampler=camvid.EpochSampler(train_ds, generator=g),
+        drop_last=len(train_ds) >= a.batch,
         num_workers=a.workers, generator=g, persistent_workers=a.workers > 0,
         pin_memory=device.type == "cuda")
     val_dl = torch.utils.data.DataLoader(val_ds, batch_size=4, num_workers=a.workers)
