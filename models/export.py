@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from semloc_models import build, count_params_folded, fold_bn  # noqa: E402
+from semloc_models import FASTSCNN_VARIANTS, build, count_params_folded, fold_bn  # noqa: E402
 
 ALLOWED_OPS = {"Conv", "Relu", "Add", "AveragePool", "ReduceMean", "Resize", "Concat"}
 
@@ -37,9 +37,9 @@ def load_model(checkpoint=None, variant=None, final_upsample=True):
     if checkpoint:
         ck = torch.load(checkpoint, map_location="cpu")
         variant = ck["variant"]
-        if variant not in ("res2net", "bottleneck"):
+        if variant not in FASTSCNN_VARIANTS:
             raise SystemExit(f"{checkpoint}: a {variant} checkpoint (the distillation teacher); "
-                             "only the Fast-SCNN variants res2net and bottleneck export")
+                             f"only the Fast-SCNN variants ({', '.join(FASTSCNN_VARIANTS)}) export")
         model = build(variant, final_upsample=final_upsample)
         model.load_state_dict(ck["model"])
     else:
@@ -159,7 +159,7 @@ def check_against_ort(path, folded, size, image=None):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--checkpoint", default="", help="train.py checkpoint (omit: random weights, for tests)")
-    p.add_argument("--variant", choices=["res2net", "bottleneck"], default="res2net",
+    p.add_argument("--variant", choices=FASTSCNN_VARIANTS, default="res2net",
                    help="only used without --checkpoint")
     p.add_argument("--size", type=parse_hw, default=(384, 1248), help="HxW static input size")
     p.add_argument("--opset", type=int, default=17)

@@ -29,7 +29,7 @@ from torch import nn
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from export import check_against_ort  # noqa: E402
-from semloc_models import build  # noqa: E402
+from semloc_models import FASTSCNN_VARIANTS, build  # noqa: E402
 from semloc_models.fastscnn import ConvBN  # noqa: E402
 
 
@@ -103,7 +103,7 @@ def rebuild(onnx_path, variant):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("onnx", help="a BN-folded export.py ONNX (e.g. models/artefacts/fastscnn_r2_192x640.onnx)")
-    p.add_argument("--variant", required=True, choices=["res2net", "bottleneck"])
+    p.add_argument("--variant", required=True, choices=FASTSCNN_VARIANTS)
     p.add_argument("--out", required=True, help="checkpoint to write (train.py's format)")
     p.add_argument("--tol", type=float, default=1e-4, help="largest |logit difference| accepted")
     a = p.parse_args(argv)

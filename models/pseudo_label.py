@@ -37,7 +37,7 @@ from PIL import Image
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import camvid  # noqa: E402
-from semloc_models import NUM_CLASSES, build  # noqa: E402
+from semloc_models import NUM_CLASSES, VARIANTS, build  # noqa: E402
 
 VOID = camvid.VOID
 DYNAMIC = set(camvid.DYNAMIC)
@@ -147,8 +147,8 @@ def disparity(left, right):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--checkpoint", required=True)
-    p.add_argument("--variant", choices=["res2net", "bottleneck"], default=None,
-                   help="default: the checkpoint's")
+    p.add_argument("--variant", choices=VARIANTS, default=None,
+                   help="default: the checkpoint's (the resunet teacher labels too)")
     p.add_argument("--out", required=True)
     p.add_argument("--raw", nargs="*", default=[], metavar="DRIVE_DIR[:POSES]")
     p.add_argument("--odometry", nargs="*", default=[], metavar="ROOT:SEQ[:POSES]")

@@ -39,7 +39,7 @@ import torch.nn.functional as F
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import camvid  # noqa: E402
 import export  # noqa: E402
-from semloc_models import NUM_CLASSES  # noqa: E402
+from semloc_models import FASTSCNN_VARIANTS, NUM_CLASSES  # noqa: E402
 
 INPUT_SCALE, INPUT_ZP = 1.0 / 255.0, -128
 
@@ -229,7 +229,7 @@ def eval_val(graph, qparams=None, wq=None, limit=0, holdout=""):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--checkpoint", default="", help="train.py checkpoint (omit: random weights, for tests)")
-    p.add_argument("--variant", choices=["res2net", "bottleneck"], default="res2net")
+    p.add_argument("--variant", choices=FASTSCNN_VARIANTS, default="res2net")
     p.add_argument("--onnx", required=True, help="deployed ONNX (from export.py); the JSON goes beside it")
     p.add_argument("--calib", type=int, default=64, help="number of CamVid train images to calibrate on")
     p.add_argument("--method", choices=["minmax", "percentile"], default="minmax")

@@ -287,7 +287,10 @@ def fold_bn(model):
     return model
 
 
-VARIANTS = ("res2net", "bottleneck", "resunet")
+# The Fast-SCNN variants (deployable: export.py, quantise.py, onnx_to_checkpoint.py, the .slm
+# converter); VARIANTS adds the distillation teacher, which train.py also builds.
+FASTSCNN_VARIANTS = ("res2net", "bottleneck")
+VARIANTS = FASTSCNN_VARIANTS + ("resunet",)
 
 
 def build(variant, **kw):
