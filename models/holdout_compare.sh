@@ -8,31 +8,18 @@
 # Written after the DataLoader fix of 2026-12-04 (camvid.EpochSampler): every earlier lent-GPU run
 # repeated its first epoch's augmentation, so this re-measures what those runs concluded.
 # Usage: bash models/holdout_compare.sh OUTDIR [BUDGET_S (default 200)] [-- extra train.py args]
-# Env: WORKERS (per run, default 3), COPY_TO (logs, metrics and the Fast-SCNN checkpoints go there).
+# Env: WORKERS (per run, default 3), COPY_TO (logs, metrics and the Fast-SCNN checkpoints go there,
+# as bn75_best.pt, bn200_best.pt, r2_75_best.pt).
 set -uo pipefail
-out=$1; shift
-b=200
-[ $# -gt 0 ] && [ "$1" != -- ] && { b=$1; shift; }
-[ $# -gt 0 ] && [ "$1" = -- ] && shift
-extra=("$@")
-here=$(cd "$(dirname "$0")" && pwd)
-export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+. "$(dirname "$0")/runs_lib.sh"
+runs_args 1 200 "${@:2}"
+runs_out "$1"
 rec=(--holdout-seq 0006R0 --aug strong --scale 0.35 2.0 --batch 8 --crop 384x384 --eval-every 10
-     --workers "${WORKERS:-3}" --time-budget "$b")
-mkdir -p "$out"
-train() { # name, train.py args...
-  local name=$1; shift
-  python3 "$here/train.py" "${rec[@]}" "$@" --out "$out/$name" ${extra[@]+"${extra[@]}"} > "$out/$name.log" 2>&1
-  echo "$name: exit $? $(tail -n 1 "$out/$name.log")"
-}
-train bn75 --variant bottleneck --epochs 75 &
-train bn200 --variant bottleneck --epochs 200 &
-train r2_75 --variant res2net --epochs 75 &
-train t_ho --variant resunet --epochs 150 --amp &
+     --workers "${WORKERS:-3}" --time-budget "${RUNS_POS[0]}")
+runs_train bn75 "${rec[@]}" --variant bottleneck --epochs 75 &
+runs_train bn200 "${rec[@]}" --variant bottleneck --epochs 200 &
+runs_train r2_75 "${rec[@]}" --variant res2net --epochs 75 &
+runs_train t_ho "${rec[@]}" --variant resunet --epochs 150 --amp &
 wait
-if [ -n "${COPY_TO:-}" ]; then
-  mkdir -p "$COPY_TO"
-  tar -C "$out" -cf "$COPY_TO/logs.tar" $(cd "$out" && ls *.log */metrics.json 2>/dev/null)
-  for r in bn75 bn200 r2_75; do [ -f "$out/$r/best.pt" ] && cp "$out/$r/best.pt" "$COPY_TO/$r.pt"; done
-fi
+runs_collect bn75/best.pt bn200/best.pt r2_75/best.pt
 exit 0

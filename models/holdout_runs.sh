@@ -11,31 +11,23 @@
 # AMP (1: bf16 autocast on CUDA; default off). The defaults are the recipe that scored 35.6 +- 0.3 %
 # int8 on 0006R0 over three seeds, against 30.8 +- 0.8 % for EPOCHS=200 BATCH=16 AMP=1 (models/README.md).
 set -euo pipefail
-out=$1; shift
-here=$(cd "$(dirname "$0")" && pwd)
-export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+. "$(dirname "$0")/runs_lib.sh"
+runs_out "$1"
+runs_args 0 "${@:2}"
+out=$RUNS_OUT
+here=$RUNS_HERE
 W=${WORKERS:-4}; E=${EPOCHS:-75}
 amp=(); [ "${AMP:-0}" = 1 ] && amp=(--amp)
 common=(--holdout-seq 0006R0 --aug strong --scale 0.35 2.0 --epochs "$E" --batch "${BATCH:-8}" --crop 384x384
         --eval-every 10 --workers "$W" ${amp[@]+"${amp[@]}"})
-mkdir -p "$out"
-python3 "$here/train.py" --variant res2net "${common[@]}" --out "$out/r2" "$@" > "$out/r2.log" 2>&1 &
-p1=$!
-python3 "$here/train.py" --variant bottleneck "${common[@]}" --out "$out/bn" "$@" > "$out/bn.log" 2>&1 &
-p2=$!
-python3 "$here/train.py" --variant res2net --class-weights enet "${common[@]}" --out "$out/r2w" "$@" \
-  > "$out/r2w.log" 2>&1 &
-p3=$!
-wait $p1 $p2 $p3
-tail -n 2 "$out"/r2.log "$out"/bn.log "$out"/r2w.log
+runs_train r2 --variant res2net "${common[@]}" &
+runs_train bn --variant bottleneck "${common[@]}" &
+runs_train r2w --variant res2net --class-weights enet "${common[@]}" &
+wait
 # int8 check on the held-out sequence, all three in parallel.
-for r in r2 bn r2w; do
-  v=$([ "$r" = bn ] && echo bottleneck || echo res2net)
-  ( python3 "$here/export.py" --checkpoint "$out/$r/best.pt" --variant "$v" --size 384x480 \
-      --out "$out/$r/fastscnn_384x480.onnx" > "$out/$r.quant.log" 2>&1 &&
-    python3 "$here/quantise.py" --checkpoint "$out/$r/best.pt" --variant "$v" --holdout-seq 0006R0 \
-      --onnx "$out/$r/fastscnn_384x480.onnx" --calib 64 --threads 4 >> "$out/$r.quant.log" 2>&1 ) &
-done
+runs_int8 r2 res2net &
+runs_int8 bn bottleneck &
+runs_int8 r2w res2net &
 wait
 grep -h "held-out" "$out"/*.quant.log || true
 best=$(python3 - "$out" <<'PY'

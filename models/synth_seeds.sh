@@ -8,10 +8,11 @@
 # Env: BASE_SEEDS (default "1 2"), SYN_SEEDS (default "0 1"), WORKERS (default 3).
 # Results of 2026-11-27: models/ablation/holdout_seeds_synth_gpu.json, models/README.md.
 set -euo pipefail
-out=$1; semloc=$2; shift 2
-here=$(cd "$(dirname "$0")" && pwd)
-export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
-mkdir -p "$out"
+. "$(dirname "$0")/runs_lib.sh"
+semloc=$2
+runs_out "$1"
+runs_args 0 "${@:3}"
+out=$RUNS_OUT
 syn=()
 i=21
 for d in high parked low static; do
@@ -23,20 +24,14 @@ common=(--variant bottleneck --holdout-seq 0006R0 --aug strong --scale 0.35 2.0 
         --batch 16 --crop 384x384 --workers "${WORKERS:-3}" --amp)
 runs=()
 for s in ${BASE_SEEDS:-1 2}; do
-  python3 "$here/train.py" "${common[@]}" --eval-every 10 --seed "$s" --out "$out/b$s" "$@" > "$out/b$s.log" 2>&1 &
+  runs_train "b$s" "${common[@]}" --eval-every 10 --seed "$s" &
   runs+=("b$s")
 done
 for s in ${SYN_SEEDS:-0 1}; do
-  python3 "$here/train.py" "${common[@]}" --eval-every 5 --seed "$s" --synth "${syn[@]}" --out "$out/s$s" "$@" \
-    > "$out/s$s.log" 2>&1 &
+  runs_train "s$s" "${common[@]}" --eval-every 5 --seed "$s" --synth "${syn[@]}" &
   runs+=("s$s")
 done
 wait
-for r in "${runs[@]}"; do
-  ( python3 "$here/export.py" --checkpoint "$out/$r/best.pt" --variant bottleneck --size 384x480 \
-      --out "$out/$r/fastscnn_384x480.onnx" > "$out/$r.quant.log" 2>&1 &&
-    python3 "$here/quantise.py" --checkpoint "$out/$r/best.pt" --variant bottleneck --holdout-seq 0006R0 \
-      --onnx "$out/$r/fastscnn_384x480.onnx" --calib 64 --threads 4 >> "$out/$r.quant.log" 2>&1 ) &
-done
+for r in "${runs[@]}"; do runs_int8 "$r" bottleneck & done
 wait
 for r in "${runs[@]}"; do echo "$r: $(grep -h 'held-out sequence' "$out/$r.quant.log")"; done
