@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Smoke test of the whole Python path on one CPU thread (~1 minute): a few training iterations on
-# 8 images, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check;
+# 8 images (ClassMix and the weight average on one variant), a checkpoint split into pieces and
+# joined, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check;
 # KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
 # ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from.
 # Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
@@ -12,13 +13,25 @@ cd "$(dirname "$0")"
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 out=runs/smoke
 for v in res2net bottleneck; do
-  mix=$([ $v = bottleneck ] && echo "--classmix 0.5" || true)
+  mix=$([ $v = bottleneck ] && echo "--classmix 0.5 --ema 0.9" || true)
   python3 train.py --variant $v --epochs 3 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 $mix \
     --eval-every 1 --threads 1 --out $out/$v
   python3 export.py --checkpoint $out/$v/best.pt --size 192x624 --out $out/$v/fastscnn_${v}_192x624.onnx
   python3 quantise.py --checkpoint $out/$v/best.pt --onnx $out/$v/fastscnn_${v}_192x624.onnx \
     --calib 4 --limit-val 4
 done
+# A checkpoint split into float16 pieces (how a lent machine sends a large teacher back) joins
+# back to the same weights.
+python3 ckpt_pieces.py split $out/bottleneck/best.pt $out/pieces/bn --max-mb 2
+python3 ckpt_pieces.py join $out/pieces/bn.part*.pt --out $out/pieces/bn.pt
+python3 -c "
+import torch
+a, b = (torch.load(p)['model'] for p in ('$out/bottleneck/best.pt', '$out/pieces/bn.pt'))
+assert a.keys() == b.keys()
+assert all(torch.equal(a[k], b[k]) for k in a if a[k].ndim < 2)
+err = max(float((a[k] - b[k]).abs().max() / a[k].abs().max().clamp_min(1e-6)) for k in a if a[k].ndim >= 2)
+assert err < 1e-3, err
+print('checkpoint pieces join back: vectors exact, weights within %.1e of their range' % err)"
 # Self-training path: pseudo-labels on the 06 clip (no poses: stereo and confidence filters
 # only), read back through the training set's augmentation.
 python3 pseudo_label.py --checkpoint $out/bottleneck/best.pt --out $out/pseudo --every 25 --threads 1 \

@@ -10,6 +10,8 @@ Checkpoints stay out of git (models/.gitignore ignores runs/).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import copy
 import json
 import math
 import os
@@ -89,7 +91,50 @@ def get_args(argv=None):
                    "training crop, void pixels included: loss = (1 - a) CE(labels) + a T^2 KL(teacher || student)")
     p.add_argument("--kd-alpha", type=float, default=0.5, metavar="A")
     p.add_argument("--kd-temp", type=float, default=2.0, metavar="T")
-    return p.parse_args(argv)
+    p.add_argument("--ema", type=float, default=0.0, metavar="D",
+                   help="keep an exponential moving average of the weights (and BatchNorm statistics) "
+                   "with decay D per iteration (e.g. 0.999; 0 = off); evaluations score both, and "
+                   "best.pt is selected on and holds the averaged weights")
+    a = p.parse_args(argv)
+    if not 0.0 <= a.ema < 1.0:
+        p.error(f"--ema {a.ema}: the decay must be in [0, 1)")
+    return a
+
+
+@contextlib.contextmanager
+def exact_fp32():
+    """Full-precision float32 convolutions and matmuls on CUDA for the duration (CUDA's default lets
+    cuDNN use TF32, whose 10-bit mantissa moves a deep network's outputs by ~1e-2: too much for a
+    check that an exact re-parametrisation left them unchanged). A no-op on CPU."""
+    saved = (torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32)
+    torch.backends.cudnn.allow_tf32 = False
+    torch.backends.cuda.matmul.allow_tf32 = False
+    try:
+        yield
+    finally:
+        torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = saved
+
+
+class WeightEma:
+    """Exponential moving average of a model's state (parameters and floating buffers, i.e.
+    BatchNorm running statistics; integer buffers are copied). The decay ramps up as
+    min(D, (1 + n) / (10 + n)) over the first updates, so the average is not dominated by the
+    random initialisation of a short run."""
+
+    def __init__(self, model, decay, updates=0):
+        self.model = copy.deepcopy(model).eval().requires_grad_(False)
+        self.decay, self.updates = decay, updates
+
+    @torch.no_grad()
+    def update(self, model):
+        self.updates += 1
+        d = min(self.decay, (1.0 + self.updates) / (10.0 + self.updates))
+        src = model.state_dict()
+        for k, v in self.model.state_dict().items():
+            if v.dtype.is_floating_point:
+                v.mul_(d).add_(src[k].detach(), alpha=1.0 - d)
+            else:
+                v.copy_(src[k])
 
 
 @torch.no_grad()
@@ -258,11 +303,16 @@ def main(argv=None):
         if init.get("variant", a.variant) != a.variant:
             raise SystemExit(f"--init {a.init}: a {init['variant']} checkpoint, not {a.variant}")
         model.load_state_dict(init["model"])
-        err = renormalise_bn(model, train_dl, device, a.renorm_batches)
+        with exact_fp32():
+            err = renormalise_bn(model, train_dl, device, a.renorm_batches)
         print(f"initialised from {a.init}; BatchNorm re-estimated on {a.renorm_batches} batches "
               f"(largest eval-mode output change {err:.2e})", flush=True)
         if not err < 1e-2:
             raise SystemExit(f"--init {a.init}: re-estimating BatchNorm changed the outputs by {err:.3g}")
+    ema = WeightEma(model, a.ema) if a.ema > 0 else None
+    if ema is not None and resume is not None and "ema" in resume:
+        ema.model.load_state_dict(resume["ema"])
+        ema.updates = resume.get("ema_updates", resume["iter"])
     teachers = []
     for path in a.teacher:
         t = torch.load(path, map_location="cpu")
@@ -334,6 +384,8 @@ def main(argv=None):
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
+            if ema is not None:
+                ema.update(model)
             if device.type == "cuda":
                 torch.cuda.synchronize()
             iter_times.append(time.time() - t0)
@@ -364,27 +416,36 @@ def main(argv=None):
                f"elapsed {time.time() - t_start:.0f}s")
         print(msg, flush=True)
         if (epoch + 1) % a.eval_every == 0 or last_epoch:
-            cm = evaluate(model, val_dl, device, a.amp)
-            m = camvid.metrics(cm)
+            # With --ema the averaged weights are the ones selected, saved and exported; the raw
+            # weights' scores are kept beside them for the comparison.
+            sel = ema.model if ema is not None else model
+            m = camvid.metrics(evaluate(sel, val_dl, device, a.amp))
             m.update(epoch=epoch + 1, iter=it, loss=run_loss / max(1, n_b), elapsed_s=time.time() - t_start)
+            if ema is not None:
+                mr = camvid.metrics(evaluate(model, val_dl, device, a.amp))
+                m.update(raw_miou=mr["miou"], raw_cat_miou=mr["cat_miou"], raw_dyn_precision=mr["dyn_precision"],
+                         raw_dyn_recall=mr["dyn_recall"])
             if seen_val_dl is not None:
-                mv = camvid.metrics(evaluate(model, seen_val_dl, device, a.amp))
+                mv = camvid.metrics(evaluate(sel, seen_val_dl, device, a.amp))
                 m.update(val_seen_miou=mv["miou"], val_seen_cat_miou=mv["cat_miou"])
             history.append(m)
             name = f"held-out {a.holdout_seq}" if a.holdout_seq else "val"
             print(f"  {name} mIoU {m['miou'] * 100:.2f}  category mIoU {m['cat_miou'] * 100:.2f}  "
                   f"pixel acc {m['pixel_acc'] * 100:.2f}"
                   + (f"  (val, seen in training: {m['val_seen_miou'] * 100:.2f})"
-                     if seen_val_dl is not None else ""), flush=True)
+                     if seen_val_dl is not None else "")
+                  + (f"  (raw weights: {m['raw_miou'] * 100:.2f})" if ema is not None else ""), flush=True)
             if m["miou"] > best["miou"]:
                 best = m
-                ckpt = {"model": model.state_dict(), "variant": a.variant, "epoch": epoch + 1,
+                ckpt = {"model": sel.state_dict(), "variant": a.variant, "epoch": epoch + 1,
                         "iter": it, "metrics": m, "args": {k: v for k, v in vars(a).items()}}
                 torch.save(ckpt, os.path.join(a.out, "best.pt"))
         # Every epoch: enough to resume an interrupted (e.g. CPU, multi-session) run exactly.
         state = {"model": model.state_dict(), "opt": opt.state_dict(), "variant": a.variant,
                  "epoch": epoch + 1, "iter": it, "history": history, "best": best,
                  "args": {k: v for k, v in vars(a).items()}}
+        if ema is not None:
+            state.update(ema=ema.model.state_dict(), ema_updates=ema.updates)
         torch.save(state, os.path.join(a.out, "last.pt.tmp"))
         os.replace(os.path.join(a.out, "last.pt.tmp"), os.path.join(a.out, "last.pt"))
         summary = {
