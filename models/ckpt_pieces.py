@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import uuid
 
 import torch
 
@@ -48,10 +49,11 @@ def split(path, prefix, max_mb):
         cur[k], size = t, size + n
     pieces.append(cur)
     os.makedirs(os.path.dirname(prefix) or ".", exist_ok=True)
+    split_id = uuid.uuid4().hex  # pieces of different splits must not be joined
     names = []
     for i, part in enumerate(pieces):
         name = f"{prefix}.part{i}.pt"
-        torch.save({"part": i, "parts": len(pieces), "model": part, "meta": meta if i == 0 else None}, name)
+        torch.save({"part": i, "parts": len(pieces), "split_id": split_id, "model": part, "meta": meta if i == 0 else None}, name)
         names.append(name)
     print(f"{path}: {len(ck['model'])} tensors in {len(pieces)} pieces: {' '.join(names)}")
 
@@ -67,6 +69,9 @@ def join(paths, out):
             fail(f"{p}: not a piece written by ckpt_pieces.py split")
         if d["part"] in parts:
             fail(f"{p}: piece {d['part']} given twice")
+        first = next(iter(parts.values()), d)
+        if (d.get("split_id"), d["parts"]) != (first.get("split_id"), first["parts"]):
+            fail(f"{p}: a piece of another split than {paths[0]}")
         parts[d["part"]] = d
     n = next(iter(parts.values()))["parts"]
     missing = sorted(set(range(n)) - set(parts))
