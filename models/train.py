@@ -229,6 +229,9 @@ def seed_all(seed):
 
 @torch.no_grad()
 def evaluate(model, loader, device, amp=False):
+    """Confusion matrix of `model` on `loader`, in eval mode; the model is left in the mode it
+    was in (the training model in training mode, --ema's averaged copy in eval mode)."""
+    was_training = model.training
     model.eval()
     cm = torch.zeros(NUM_CLASSES, NUM_CLASSES, dtype=torch.int64)
     for x, y in loader:
@@ -237,7 +240,7 @@ def evaluate(model, loader, device, amp=False):
             logits = model(x)
         pred = logits.float().argmax(1).cpu()
         cm += camvid.confusion(pred, y)
-    model.train()
+    model.train(was_training)
     return cm
 
 
