@@ -15,7 +15,6 @@ set -euo pipefail
 runs_out "$1"
 runs_args 0 "${@:2}"
 out=$RUNS_OUT
-here=$RUNS_HERE
 W=${WORKERS:-4}; E=${EPOCHS:-75}
 amp=(); [ "${AMP:-0}" = 1 ] && amp=(--amp)
 common=(--holdout-seq 0006R0 --aug strong --scale 0.35 2.0 --epochs "$E" --batch "${BATCH:-8}" --crop 384x384
@@ -47,9 +46,7 @@ short=$([ "$v" = res2net ] && echo r2 || echo bn)
 mkdir -p "$out/artefacts"
 for size in 192x640 384x1248 384x480; do
   stem=$out/artefacts/fastscnn_${short}_${size}
-  ( python3 "$here/export.py" --checkpoint "$out/$best/best.pt" --variant "$v" --size "$size" --out "$stem.onnx" &&
-    python3 "$here/quantise.py" --checkpoint "$out/$best/best.pt" --variant "$v" --onnx "$stem.onnx" \
-      --calib 64 --holdout-seq 0006R0 --no-eval ) > "$stem.log" 2>&1 &
+  runs_quant "$out/$best/best.pt" "$v" "$size" "$stem" "$stem.log" --no-eval &
 done
 wait
 echo "artefacts of $best in $out/artefacts"

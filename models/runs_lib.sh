@@ -36,15 +36,23 @@ runs_train() {
   return $rc
 }
 
-# runs_int8 NAME VARIANT: exports $RUNS_OUT/NAME/best.pt at 384x480 and scores it in f32 and
-# int8 on the held-out sequence 0006R0 (quantise.py, 64 calibration images without it); the log
-# is $RUNS_OUT/NAME.quant.log, the figures $RUNS_OUT/NAME/fastscnn_384x480.quant.json.
+# runs_quant CKPT VARIANT SIZE STEM LOG [quantise.py args...]: exports CKPT at SIZE (HxW) to
+# STEM.onnx and quantises it with 64 calibration images drawn without the held-out sequence 0006R0
+# (quantise.py writes STEM.quant.json); both tools' output goes to LOG.
+runs_quant() {
+  local ckpt=$1 v=$2 size=$3 stem=$4 log=$5
+  shift 5
+  { python3 "$RUNS_HERE/export.py" --checkpoint "$ckpt" --variant "$v" --size "$size" --out "$stem.onnx" &&
+    python3 "$RUNS_HERE/quantise.py" --checkpoint "$ckpt" --variant "$v" --holdout-seq 0006R0 \
+      --onnx "$stem.onnx" --calib 64 "$@"; } > "$log" 2>&1
+}
+
+# runs_int8 NAME VARIANT: runs_quant of $RUNS_OUT/NAME/best.pt at 384x480, scored in f32 and int8
+# on the held-out sequence 0006R0; the log is $RUNS_OUT/NAME.quant.log, the figures
+# $RUNS_OUT/NAME/fastscnn_384x480.quant.json.
 runs_int8() {
-  local name=$1 v=$2 d=$RUNS_OUT/$1
-  { python3 "$RUNS_HERE/export.py" --checkpoint "$d/best.pt" --variant "$v" --size 384x480 \
-      --out "$d/fastscnn_384x480.onnx" &&
-    python3 "$RUNS_HERE/quantise.py" --checkpoint "$d/best.pt" --variant "$v" --holdout-seq 0006R0 \
-      --onnx "$d/fastscnn_384x480.onnx" --calib 64 --threads 4; } > "$RUNS_OUT/$name.quant.log" 2>&1
+  local d=$RUNS_OUT/$1
+  runs_quant "$d/best.pt" "$2" 384x480 "$d/fastscnn_384x480" "$RUNS_OUT/$1.quant.log" --threads 4
 }
 
 # runs_collect FILE...: with COPY_TO set, tars every log and metrics.json of $RUNS_OUT into
