@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# Judges a candidate segmentation network where it matters, on the real clips, against the
+# committed network and against a null swap (models/README.md, "Again, with the stronger teacher"):
+#   cand  CHECKPOINT exported at 192x640, quantised (64 CamVid train images) and converted, as
+#         make_artefacts.sh does;
+#   null  the committed network rebuilt from its ONNX (onnx_to_checkpoint.py) and put through the
+#         same steps: the same float weights, a slightly different int8 network. It moves the
+#         clips' ATE by a few per cent, the floor a candidate has to clear;
+#   ref   the committed models/artefacts/fastscnn_r2_192x640.slm.
+# Each runs `semloc ablate --semantics full,motion --assoc em --align sim3` from 13 starts of the
+# KITTI 01 and 06 clips (frames 0-24:2) and 9 of drive 0005 (0-40:5). Then `semloc compare`
+# prints, per clip, null / ref and cand / ref paired per start (the JSON beside it).
+# The ref and null runs are kept in OUTDIR and reused: judge several candidates into one OUTDIR.
+# Usage: bash models/judge_on_clips.sh CHECKPOINT VARIANT OUTDIR [SEMLOC_BINARY]
+# VARIANT is read as export.py reads it: a checkpoint of train.py records its own, which wins.
+# Env: SEMLOC_DATA (default ../shared/data beside the checkout). Needs a release build of semloc
+# (default target/release/semloc) and models/'s Python. About 3 minutes per network on 2 cores
+# (9 minutes the first time, with ref and null).
+set -euo pipefail
+ckpt=$1; variant=$2; out=$3
+here=$(cd "$(dirname "$0")" && pwd)
+semloc=${4:-$here/../target/release/semloc}
+data=${SEMLOC_DATA:-$here/../../shared/data}
+committed=$here/artefacts/fastscnn_r2_192x640
+export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+for f in "$ckpt" "$semloc" "$committed.slm" "$committed.onnx"; do
+  [ -f "$f" ] || { echo "judge_on_clips: $f: no such file" >&2; exit 1; }
+done
+for d in "$data/kitti-odometry/sequences/01" "$data/kitti-odometry/sequences/06" "$data/kitti-raw"; do
+  [ -d "$d" ] || { echo "judge_on_clips: $d: no such folder (set SEMLOC_DATA)" >&2; exit 1; }
+done
+mkdir -p "$out"
+
+# slm NAME CKPT VARIANT: $out/NAME/fastscnn_192x640.slm from a checkpoint.
+slm() {
+  local stem=$out/$1/fastscnn_192x640
+  mkdir -p "$out/$1"
+  { python3 "$here/export.py" --checkpoint "$2" --variant "$3" --size 192x640 --out "$stem.onnx" &&
+    python3 "$here/quantise.py" --checkpoint "$2" --variant "$3" --onnx "$stem.onnx" --calib 64 &&
+    "$semloc" convert --onnx "$stem.onnx" --quant "$stem.quant.json" --out "$stem.slm"; } \
+    > "$out/$1.convert.log" 2>&1 || { echo "judge_on_clips: $1: conversion failed, see $out/$1.convert.log" >&2; exit 1; }
+}
+
+# ablate NAME SLM: the three clips' runs in $out/NAME-{01,06,0005}, skipped where they exist.
+ablate() {
+  local rows=(--semantics full,motion --assoc em --model "$2" --align sim3 --force) c
+  for c in 01 06 0005; do
+    [ -f "$out/$1-$c/ablation.json" ] && continue
+    if [ "$c" = 0005 ]; then
+      "$semloc" ablate "$data/kitti-raw" --drive 2011_09_26_0005 "${rows[@]}" --first-frames 0-40:5 \
+        --out "$out/$1-$c" > "$out/$1-$c.log" 2>&1
+    else
+      "$semloc" ablate "$data/kitti-odometry" --seq "$c" "${rows[@]}" --first-frames 0-24:2 \
+        --out "$out/$1-$c" > "$out/$1-$c.log" 2>&1
+    fi || { echo "judge_on_clips: $1 on $c failed, see $out/$1-$c.log" >&2; exit 1; }
+  done
+}
+
+if [ ! -f "$out/null/fastscnn_192x640.slm" ]; then
+  python3 "$here/onnx_to_checkpoint.py" "$committed.onnx" --variant res2net --out "$out/null.pt" \
+    > "$out/null.rebuild.log" 2>&1
+  slm null "$out/null.pt" res2net
+fi
+slm cand "$ckpt" "$variant"
+rm -rf "$out"/cand-01 "$out"/cand-06 "$out"/cand-0005
+ablate ref "$committed.slm"
+ablate null "$out/null/fastscnn_192x640.slm"
+ablate cand "$out/cand/fastscnn_192x640.slm"
+for c in 01 06 0005; do
+  for v in null cand; do
+    echo "== $c: $v / ref"
+    "$semloc" compare "$out/ref-$c" "$out/$v-$c" --json "$out/compare-$v-$c.json" | grep -E "/em"
+  done
+done
