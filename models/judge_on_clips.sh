@@ -10,7 +10,8 @@
 # Each runs `semloc ablate --semantics full,motion --assoc em --align sim3` from 13 starts of the
 # KITTI 01 and 06 clips (frames 0-24:2) and 9 of drive 0005 (0-40:5). Then `semloc compare`
 # prints, per clip, null / ref and cand / ref paired per start (the JSON beside it).
-# The ref and null runs are kept in OUTDIR and reused: judge several candidates into one OUTDIR.
+# The ref and null runs are kept in OUTDIR and reused, so several candidates can be judged one
+# after another into one OUTDIR; each candidate's runs and comparisons replace the previous one's.
 # Usage: bash models/judge_on_clips.sh CHECKPOINT VARIANT OUTDIR [SEMLOC_BINARY]
 # VARIANT is read as export.py reads it: a checkpoint of train.py records its own, which wins.
 # Env: SEMLOC_DATA (default ../shared/data beside the checkout). Needs a release build of semloc
@@ -58,7 +59,7 @@ ablate() {
 
 if [ ! -f "$out/null/fastscnn_192x640.slm" ]; then
   python3 "$here/onnx_to_checkpoint.py" "$committed.onnx" --variant res2net --out "$out/null.pt" \
-    > "$out/null.rebuild.log" 2>&1
+    > "$out/null.rebuild.log" 2>&1 || { echo "judge_on_clips: rebuilding the committed network failed, see $out/null.rebuild.log" >&2; exit 1; }
   slm null "$out/null.pt" res2net
 fi
 slm cand "$ckpt" "$variant"
