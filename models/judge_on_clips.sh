@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Judges a candidate segmentation network where it matters, on the real clips, against the
 # committed network and against a null swap (models/README.md, "Again, with the stronger teacher"):
-#   cand  CHECKPOINT exported at 192x640, quantised (64 CamVid train images) and converted, as
-#         make_artefacts.sh does;
+#   cand  CHECKPOINT exported at 192x640, quantised (64 CamVid train images) and converted by
+#         make_artefacts.sh;
 #   null  the committed network rebuilt from its ONNX (onnx_to_checkpoint.py) and put through the
 #         same steps: the same float weights, a slightly different int8 network. It moves the
 #         clips' ATE by a few per cent, the floor a candidate has to clear;
@@ -32,15 +32,14 @@ for d in "$data/kitti-odometry/sequences/01" "$data/kitti-odometry/sequences/06"
 done
 mkdir -p "$out"
 
-# slm NAME CKPT VARIANT: $out/NAME/fastscnn_192x640.slm from a checkpoint.
+# slm NAME CKPT VARIANT: make_artefacts.sh at 192x640 into $out/NAME/; the blob is
+# $out/NAME/fastscnn_{r2,bn}_192x640.slm.
 slm() {
-  local stem=$out/$1/fastscnn_192x640
-  mkdir -p "$out/$1"
-  { python3 "$here/export.py" --checkpoint "$2" --variant "$3" --size 192x640 --out "$stem.onnx" &&
-    python3 "$here/quantise.py" --checkpoint "$2" --variant "$3" --onnx "$stem.onnx" --calib 64 &&
-    "$semloc" convert --onnx "$stem.onnx" --quant "$stem.quant.json" --out "$stem.slm"; } \
+  SIZES=192x640 ARTEFACTS=$out/$1 bash "$here/make_artefacts.sh" "$2" "$3" "$semloc" \
     > "$out/$1.convert.log" 2>&1 || { echo "judge_on_clips: $1: conversion failed, see $out/$1.convert.log" >&2; exit 1; }
 }
+# blob NAME: the path of slm NAME's blob.
+blob() { ls "$out/$1"/fastscnn_*_192x640.slm; }
 
 # ablate NAME SLM: the three clips' runs in $out/NAME-{01,06,0005}, skipped where they exist.
 ablate() {
@@ -57,16 +56,17 @@ ablate() {
   done
 }
 
-if [ ! -f "$out/null/fastscnn_192x640.slm" ]; then
+if ! blob null > /dev/null 2>&1; then
   python3 "$here/onnx_to_checkpoint.py" "$committed.onnx" --variant res2net --out "$out/null.pt" \
     > "$out/null.rebuild.log" 2>&1 || { echo "judge_on_clips: rebuilding the committed network failed, see $out/null.rebuild.log" >&2; exit 1; }
   slm null "$out/null.pt" res2net
 fi
+rm -rf "$out/cand"
 slm cand "$ckpt" "$variant"
 rm -rf "$out"/cand-01 "$out"/cand-06 "$out"/cand-0005
 ablate ref "$committed.slm"
-ablate null "$out/null/fastscnn_192x640.slm"
-ablate cand "$out/cand/fastscnn_192x640.slm"
+ablate null "$(blob null)"
+ablate cand "$(blob cand)"
 for c in 01 06 0005; do
   for v in null cand; do
     echo "== $c: $v / ref"

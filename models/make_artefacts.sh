@@ -7,13 +7,16 @@
 # Each gets <stem>.onnx (f32, BN folded), <stem>.quant.json (int8 PTQ on 64 CamVid train
 # images), <stem>.export.json and <stem>.slm (the core's blob, from `semloc convert`).
 # Usage: bash models/make_artefacts.sh CHECKPOINT VARIANT [SEMLOC_BINARY]
+# Env: SIZES (default "192x640 256x832 384x1248 384x480"), ARTEFACTS (the output folder, default
+# models/artefacts): judge_on_clips.sh builds a candidate's 192x640 blob with them.
 set -euo pipefail
 ckpt=$1; variant=$2; semloc=${3:-target/release/semloc}
 here=$(cd "$(dirname "$0")" && pwd)
 short=$([ "$variant" = res2net ] && echo r2 || echo bn)
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
-for size in 192x640 256x832 384x1248 384x480; do
-  stem=$here/artefacts/fastscnn_${short}_${size}
+mkdir -p "${ARTEFACTS:=$here/artefacts}"
+for size in ${SIZES:-192x640 256x832 384x1248 384x480}; do
+  stem=$ARTEFACTS/fastscnn_${short}_${size}
   python3 "$here/export.py" --checkpoint "$ckpt" --variant "$variant" --size "$size" --out "$stem.onnx"
   python3 "$here/quantise.py" --checkpoint "$ckpt" --variant "$variant" --onnx "$stem.onnx" --calib 64
   "$semloc" convert --onnx "$stem.onnx" --quant "$stem.quant.json" --out "$stem.slm"
