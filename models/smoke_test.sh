@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Smoke test of the whole Python path on one CPU thread (~1 minute): a few training iterations on
 # 8 images (ClassMix and the weight average on one variant), a checkpoint split into pieces and
-# joined, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check;
+# joined, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check; the
+# dynamic mask's operating points on the held-out sequence;
 # KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
 # ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from.
 # Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
@@ -32,6 +33,17 @@ assert all(torch.equal(a[k], b[k]) for k in a if a[k].ndim < 2)
 err = max(float((a[k] - b[k]).abs().max() / a[k].abs().max().clamp_min(1e-6)) for k in a if a[k].ndim >= 2)
 assert err < 1e-3, err
 print('checkpoint pieces join back: vectors exact, weights within %.1e of their range' % err)"
+# The dynamic mask's operating points on the held-out sequence (dyn_mask_points.py): every
+# precision and recall is a fraction, and a higher threshold never raises recall.
+python3 dyn_mask_points.py $out/bottleneck/best.pt --json $out/dynpts.json > $out/dynpts.log
+python3 -c "
+import json
+r = json.load(open('$out/dynpts.json'))['runs'][0]
+pts = [r['argmax']] + list(r['p_dynamic_above'].values()) + list(r['regions_at_least'].values())
+assert r['images'] == 101 and all(0 <= v <= 1 for p in pts for v in p.values()), r
+rec = [p['recall'] for p in r['p_dynamic_above'].values()]
+assert rec == sorted(rec, reverse=True), rec
+print('dynamic-mask operating points: %d, on %d held-out images' % (len(pts), r['images']))"
 # Self-training path: pseudo-labels on the 06 clip (no poses: stereo and confidence filters
 # only), read back through the training set's augmentation.
 python3 pseudo_label.py --checkpoint $out/bottleneck/best.pt --out $out/pseudo --every 25 --threads 1 \
