@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import pickle
 import sys
 
 import numpy as np
@@ -23,23 +24,19 @@ import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import camvid  # noqa: E402
-from semloc_models import FASTSCNN_VARIANTS, build  # noqa: E402
+from export import load_model  # noqa: E402
 
 THRESHOLDS = (0.3, 0.4, 0.5, 0.6, 0.7)
 MIN_AREAS = (50, 200, 500, 1000, 2000)
 
 
 def load(path):
+    """export.py's loader (which refuses a teacher checkpoint by name), with a missing or foreign
+    file named rather than a traceback."""
     try:
-        ck = torch.load(path, map_location="cpu")
-        variant = ck["variant"]
-        if variant not in FASTSCNN_VARIANTS:
-            raise SystemExit(f"{path}: a {variant} checkpoint; only Fast-SCNN variants are scored")
-        model = build(variant)
-        model.load_state_dict(ck["model"])
-    except (OSError, KeyError, RuntimeError) as e:
+        return load_model(path)
+    except (OSError, KeyError, RuntimeError, pickle.UnpicklingError) as e:
         raise SystemExit(f"{path}: not a train.py checkpoint ({e})")
-    return model.eval(), variant
 
 
 def pr(masks, gts):
