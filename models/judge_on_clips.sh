@@ -43,16 +43,15 @@ blob() { ls "$out/$1"/fastscnn_*_192x640.slm; }
 
 # ablate NAME SLM: the three clips' runs in $out/NAME-{01,06,0005}, skipped where they exist.
 ablate() {
-  local rows=(--semantics full,motion --assoc em --model "$2" --align sim3 --force) c
+  local rows=(--semantics full,motion --assoc em --model "$2" --align sim3 --force) c src starts
   for c in 01 06 0005; do
     [ -f "$out/$1-$c/ablation.json" ] && continue
-    if [ "$c" = 0005 ]; then
-      "$semloc" ablate "$data/kitti-raw" --drive 2011_09_26_0005 "${rows[@]}" --first-frames 0-40:5 \
-        --out "$out/$1-$c" > "$out/$1-$c.log" 2>&1
-    else
-      "$semloc" ablate "$data/kitti-odometry" --seq "$c" "${rows[@]}" --first-frames 0-24:2 \
-        --out "$out/$1-$c" > "$out/$1-$c.log" 2>&1
-    fi || { echo "judge_on_clips: $1 on $c failed, see $out/$1-$c.log" >&2; exit 1; }
+    case $c in
+      0005) src=("$data/kitti-raw" --drive 2011_09_26_0005); starts=0-40:5 ;;
+      *) src=("$data/kitti-odometry" --seq "$c"); starts=0-24:2 ;;
+    esac
+    "$semloc" ablate "${src[@]}" "${rows[@]}" --first-frames "$starts" --out "$out/$1-$c" \
+      > "$out/$1-$c.log" 2>&1 || { echo "judge_on_clips: $1 on $c failed, see $out/$1-$c.log" >&2; exit 1; }
   done
 }
 
