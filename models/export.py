@@ -38,7 +38,7 @@ def load_model(checkpoint=None, variant=None, final_upsample=True):
         ck = torch.load(checkpoint, map_location="cpu")
         variant = ck["variant"]
         if variant not in FASTSCNN_VARIANTS:
-            raise SystemExit(f"{checkpoint}: a {variant} checkpoint (the distillation teacher); "
+            raise SystemExit(f"{checkpoint}: a {variant} checkpoint (training only, no int8 ops for it); "
                              f"only the Fast-SCNN variants ({', '.join(FASTSCNN_VARIANTS)}) export")
         model = build(variant, final_upsample=final_upsample)
         model.load_state_dict(ck["model"])

@@ -25,7 +25,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import camvid  # noqa: E402
-from semloc_models import IGNORE_INDEX, NUM_CLASSES, VARIANTS, build, count_params  # noqa: E402
+from semloc_models import IGNORE_INDEX, NUM_CLASSES, VARIANTS, build, count_params, zero_init_residual  # noqa: E402
 
 
 def parse_hw(s):
@@ -36,7 +36,8 @@ def parse_hw(s):
 def get_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--variant", choices=list(VARIANTS), default="res2net",
-                   help="resunet: the larger distillation teacher (semloc_models/teacher.py), never exported")
+                   help="resunet: the larger distillation teacher (semloc_models/teacher.py); bottleneck-ibn: the "
+                   "bottleneck with IBN in the LDS (a domain-generalisation experiment); both never exported")
     p.add_argument("--epochs", type=int, default=200)
     p.add_argument("--max-iters", type=int, default=0, help="stop after this many iterations (smoke runs)")
     p.add_argument("--time-budget", type=float, default=0,
@@ -91,6 +92,9 @@ def get_args(argv=None):
                    "training crop, void pixels included: loss = (1 - a) CE(labels) + a T^2 KL(teacher || student)")
     p.add_argument("--kd-alpha", type=float, default=0.5, metavar="A")
     p.add_argument("--kd-temp", type=float, default=2.0, metavar="T")
+    p.add_argument("--zero-init-residual", action="store_true",
+                   help="start every residual block as the identity: the BatchNorm scale of its last conv "
+                   "(Bottleneck's projection, Res2NetBlock's expand) set to 0 (Goyal et al. 2017)")
     p.add_argument("--ema", type=float, default=0.0, metavar="D",
                    help="keep an exponential moving average of the weights (and BatchNorm statistics) "
                    "with decay D per iteration (e.g. 0.999; 0 = off); evaluations score both, and "
@@ -296,6 +300,8 @@ def main(argv=None):
                    if seen_val_ds is not None else None)
 
     model = build(a.variant).to(device)
+    if a.zero_init_residual:
+        print(f"zero-initialised residual branches: {zero_init_residual(model)}", flush=True)
     resume = torch.load(a.resume, map_location="cpu") if a.resume else None
     if resume is not None:
         model.load_state_dict(resume["model"])

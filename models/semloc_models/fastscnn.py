@@ -36,23 +36,42 @@ NUM_CLASSES = 11
 IGNORE_INDEX = 11
 
 
-class ConvBN(nn.Sequential):
-    """Conv2d (no bias) + BatchNorm2d (+ ReLU). Folded to one Conv (with bias) by fold_bn."""
+class IBN(nn.Module):
+    """IBN-a normalisation (Pan et al., ECCV 2018): InstanceNorm (affine) on the first half of the
+    channels, BatchNorm on the rest. Per-image statistics take each image's exposure and contrast
+    out of the shallow features, which IBN-Net found to carry appearance rather than content and
+    to be what fails to transfer across domains. Training only: the int8 core has no instance
+    normalisation, and it does not fold into the conv."""
 
-    def __init__(self, cin, cout, k=1, stride=1, groups=1, relu=True, dilation=1):
+    def __init__(self, c):
+        super().__init__()
+        self.n_in = c // 2
+        self.inorm = nn.InstanceNorm2d(self.n_in, affine=True)
+        self.bn = nn.BatchNorm2d(c - self.n_in)
+
+    def forward(self, x):
+        a, b = torch.split(x, [self.n_in, x.shape[1] - self.n_in], dim=1)
+        return torch.cat([self.inorm(a), self.bn(b)], dim=1)
+
+
+class ConvBN(nn.Sequential):
+    """Conv2d (no bias) + BatchNorm2d (+ ReLU). Folded to one Conv (with bias) by fold_bn.
+    ibn=True: IBN instead of BatchNorm (not folded; training-only variants)."""
+
+    def __init__(self, cin, cout, k=1, stride=1, groups=1, relu=True, dilation=1, ibn=False):
         pad = dilation * (k - 1) // 2
         layers = [
             nn.Conv2d(cin, cout, k, stride, pad, dilation=dilation, groups=groups, bias=False),
-            nn.BatchNorm2d(cout),
+            IBN(cout) if ibn else nn.BatchNorm2d(cout),
         ]
         if relu:
             layers.append(nn.ReLU(inplace=True))
         super().__init__(*layers)
 
 
-def dsconv(cin, cout, stride=1):
-    """Depthwise-separable conv: depthwise 3x3 (BN, ReLU) + pointwise 1x1 (BN, ReLU)."""
-    return nn.Sequential(ConvBN(cin, cin, 3, stride, groups=cin), ConvBN(cin, cout, 1))
+def dsconv(cin, cout, stride=1, ibn=False):
+    """Depthwise-separable conv: depthwise 3x3 (BN, ReLU) + pointwise 1x1 (BN or IBN, ReLU)."""
+    return nn.Sequential(ConvBN(cin, cin, 3, stride, groups=cin), ConvBN(cin, cout, 1, ibn=ibn))
 
 
 class Bottleneck(nn.Module):
@@ -218,11 +237,14 @@ class FastSCNN(nn.Module):
     R2_WIDTH = {64: 256, 96: 384, 128: 592}  # group widths 64, 96, 148
 
     def __init__(self, in_ch=1, num_classes=NUM_CLASSES, gfe_block="bottleneck", dropout=0.1,
-                 ffm_dilation=1, final_upsample=True, r2_width=None, scales=4):
+                 ffm_dilation=1, final_upsample=True, r2_width=None, scales=4, lds_ibn=False):
         super().__init__()
         self.gfe_block = gfe_block
         self.final_upsample = final_upsample
-        self.lds = nn.Sequential(ConvBN(in_ch, 32, 3, 2), dsconv(32, 48, 2), dsconv(48, 64, 2))
+        # lds_ibn: IBN after the first conv and the first DSConv's pointwise conv (not after the
+        # last LDS layer, whose output is the FFM's high-resolution input).
+        self.lds = nn.Sequential(ConvBN(in_ch, 32, 3, 2, ibn=lds_ibn), dsconv(32, 48, 2, ibn=lds_ibn),
+                                 dsconv(48, 64, 2))
         cfg = [(64, 3, 2), (96, 3, 2), (128, 3, 1)]  # (channels, repeats, first stride)
         blocks, cin = [], 64
         widths = dict(self.R2_WIDTH)
@@ -269,6 +291,22 @@ def count_params_folded(model):
 
 
 @torch.no_grad()
+def zero_init_residual(model):
+    """Zero the BatchNorm scale of the last conv of every residual block (Bottleneck's linear
+    projection, Res2NetBlock's expand), so that each block starts as the identity and the deep
+    stack trains like a shallow one at first (Goyal et al. 2017). Returns the blocks changed."""
+    n = 0
+    for m in model.modules():
+        if isinstance(m, Bottleneck) and m.residual:
+            nn.init.zeros_(m.block[-1][1].weight)
+            n += 1
+        elif isinstance(m, Res2NetBlock) and m.residual:
+            nn.init.zeros_(m.expand[1].weight)
+            n += 1
+    return n
+
+
+@torch.no_grad()
 def fold_bn(model):
     """Fold every ConvBN's BatchNorm into its conv (in place); returns the model (eval mode)."""
     model.eval()
@@ -288,17 +326,21 @@ def fold_bn(model):
 
 
 # The Fast-SCNN variants (deployable: export.py, quantise.py, onnx_to_checkpoint.py, the .slm
-# converter); VARIANTS adds the distillation teacher, which train.py also builds.
+# converter); VARIANTS adds the training-only ones train.py also builds: the distillation teacher,
+# and the bottleneck with IBN in the LDS (a domain-generalisation experiment; no int8 op for it).
 FASTSCNN_VARIANTS = ("res2net", "bottleneck")
-VARIANTS = FASTSCNN_VARIANTS + ("resunet",)
+VARIANTS = FASTSCNN_VARIANTS + ("bottleneck-ibn", "resunet")
 
 
 def build(variant, **kw):
-    """'res2net' / 'bottleneck': the deployable Fast-SCNN; 'resunet': the distillation teacher."""
+    """'res2net' / 'bottleneck': the deployable Fast-SCNN; 'bottleneck-ibn': the bottleneck with
+    IBN in the LDS (training only); 'resunet': the distillation teacher."""
     if variant == "resunet":
         from .teacher import ResUNet
 
         return ResUNet(**kw)
+    if variant == "bottleneck-ibn":
+        return FastSCNN(gfe_block="bottleneck", lds_ibn=True, **kw)
     return FastSCNN(gfe_block=variant, **kw)
 
 
