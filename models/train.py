@@ -301,7 +301,12 @@ def main(argv=None):
 
     model = build(a.variant).to(device)
     if a.zero_init_residual:
-        print(f"zero-initialised residual branches: {zero_init_residual(model)}", flush=True)
+        if a.init or a.resume:
+            raise SystemExit("--zero-init-residual initialises a run from scratch; --init and --resume load weights")
+        n = zero_init_residual(model)
+        if n == 0:
+            raise SystemExit(f"--zero-init-residual: the {a.variant} variant has no Bottleneck or Res2Net blocks")
+        print(f"zero-initialised residual branches: {n}", flush=True)
     resume = torch.load(a.resume, map_location="cpu") if a.resume else None
     if resume is not None:
         model.load_state_dict(resume["model"])
