@@ -18,7 +18,9 @@
 #        [-- extra train.py args]
 # PHASE1_S / PHASE2_S (default 330 / 320): --time-budget of each phase's runs (a run that would not
 # finish its schedule in it is shortened; train.py's metrics.json records that as time_budget_fit).
-# Env: WORKERS (DataLoader workers per run, default 3), COPY_TO (each phase's logs and metrics, and
+# Env: R2_ARGS (extra train.py arguments for the five res2net runs only, e.g.
+# --zero-init-residual; the -- arguments reach every run, the teachers included), WORKERS
+# (DataLoader workers per run, default 3), COPY_TO (each phase's logs and metrics, and
 # the res2net checkpoints r2_s0_best.pt, r2_s1_best.pt, kd_r2_s0_best.pt, kd_r2_s1_best.pt and
 # dep_kd_best.pt: 6 files in all).
 # After it, on the CPU machine: runs_int8 (runs_lib.sh) on each held-out checkpoint for the int8
@@ -31,12 +33,13 @@ case $phase in 1 | 2 | all) ;; *) echo "PHASE must be 1, 2 or all, not '$phase'"
 runs_out "$1"
 rec=(--aug strong --scale 0.35 2.0 --batch 8 --crop 384x384 --eval-every 10 --workers "${WORKERS:-3}")
 ho=(--holdout-seq 0006R0 "${rec[@]}")
+read -ra r2 <<< "${R2_ARGS:-}"
 t0=$(date +%s)
 if [ "$phase" != 2 ]; then
   runs_train t_ho --variant resunet "${ho[@]}" --epochs 150 --amp --time-budget "$b1" &
   runs_train t_all --variant resunet "${rec[@]}" --epochs 150 --amp --time-budget "$b1" &
-  runs_train r2_s0 --variant res2net "${ho[@]}" --epochs 75 --seed 0 --time-budget "$b1" &
-  runs_train r2_s1 --variant res2net "${ho[@]}" --epochs 75 --seed 1 --time-budget "$b1" &
+  runs_train r2_s0 --variant res2net "${ho[@]}" --epochs 75 --seed 0 --time-budget "$b1" ${r2[@]+"${r2[@]}"} &
+  runs_train r2_s1 --variant res2net "${ho[@]}" --epochs 75 --seed 1 --time-budget "$b1" ${r2[@]+"${r2[@]}"} &
   wait
   echo "phase 1: $(( $(date +%s) - t0 )) s"
   runs_collect r2_s0/best.pt r2_s1/best.pt
@@ -46,10 +49,10 @@ if [ "$phase" != 1 ]; then
     [ -f "$RUNS_OUT/$t/best.pt" ] || { echo "no teacher at $RUNS_OUT/$t/best.pt: run phase 1 first" >&2; exit 1; }
   done
   for s in 0 1; do
-    runs_train kd_r2_s$s --variant res2net "${ho[@]}" --epochs 75 --seed $s --time-budget "$b2" \
+    runs_train kd_r2_s$s --variant res2net "${ho[@]}" --epochs 75 --seed $s --time-budget "$b2" ${r2[@]+"${r2[@]}"} \
       --teacher "$RUNS_OUT/t_ho/best.pt" &
   done
-  runs_train dep_kd --variant res2net "${rec[@]}" --epochs 75 --time-budget "$b2" \
+  runs_train dep_kd --variant res2net "${rec[@]}" --epochs 75 --time-budget "$b2" ${r2[@]+"${r2[@]}"} \
     --teacher "$RUNS_OUT/t_all/best.pt" &
   wait
   echo "phase 2: $(( $(date +%s) - t0 )) s"
