@@ -116,7 +116,8 @@ class CamVid(torch.utils.data.Dataset):
     """split 'train' (augmented random crops) or 'val' (whole images, padded to a multiple of 32).
 
     Augmentation (train): random scale 0.5..2.0 (bilinear image, nearest label), random crop of
-    `crop` (h, w) (padding with void / edge where the scaled image is smaller), horizontal flip,
+    `crop` (h, w) (padding with void / edge where the scaled image is smaller; a list of shapes takes
+    them in turn by epoch, so a batch's crops share one shape), horizontal flip,
     brightness/contrast/gamma jitter, Gaussian noise. All randomness comes from a per-sample
     generator seeded with (seed, epoch, index), so runs are reproducible for any worker count.
     The epoch must reach the DataLoader's worker processes, which hold copies of the dataset made
@@ -124,13 +125,15 @@ class CamVid(torch.utils.data.Dataset):
     """
 
     def __init__(self, split, root=DEFAULT_ROOT, crop=(384, 384), augment=None, limit=None,
-                 scale=(0.5, 2.0), seed=0, cache=True, items=None, strong=False):
+                 scale=(0.5, 2.0), seed=0, cache=True, items=None, strong=False, pad_random=False):
         self.split = split
+        self.pad_random = pad_random
         self.items = list_split(root, split) if items is None else list(items)
         self.strong = strong
         if limit:
             self.items = self.items[:limit]
-        self.crop = crop
+        self.crops = [tuple(crop)] if isinstance(crop[0], int) else [tuple(c) for c in crop]
+        self.crop = self.crops[0]
         self.augment = (split == "train") if augment is None else augment
         self.scale = scale
         self.seed = seed
@@ -159,25 +162,29 @@ class CamVid(torch.utils.data.Dataset):
         img, lab = self._load(i)
         if self.augment:
             rng = random.Random((self.seed * 1_000_003 + epoch) * 10_007 + i)
-            img, lab = self._augment(img, lab, rng)
+            img, lab = self._augment(img, lab, rng, self.crops[epoch % len(self.crops)])
         else:
             img, lab = pad_to_multiple(img, lab)
         x = torch.from_numpy(np.ascontiguousarray(img, dtype=np.float32) / 255.0)[None]
         y = torch.from_numpy(np.ascontiguousarray(lab).astype(np.int64))
         return x, y
 
-    def _augment(self, img, lab, rng):
+    def _augment(self, img, lab, rng, crop):
         h, w = img.shape
         s = rng.uniform(*self.scale)
         nh, nw = max(1, round(h * s)), max(1, round(w * s))
         img = np.asarray(Image.fromarray(img).resize((nw, nh), Image.BILINEAR), dtype=np.float32)
         lab = np.asarray(Image.fromarray(lab).resize((nw, nh), Image.NEAREST))
-        ch, cw = self.crop
+        ch, cw = crop
         # pad (image with its mean-free edge, label void) when smaller than the crop
         ph, pw = max(0, ch - nh), max(0, cw - nw)
         if ph or pw:
-            img = np.pad(img, ((0, ph), (0, pw)), mode="edge")
-            lab = np.pad(lab, ((0, ph), (0, pw)), mode="constant", constant_values=VOID)
+            # by default the image sits at the crop's top left; `pad_random` places it anywhere in
+            # it (a wide crop otherwise always has the image on its left and edge streaks right)
+            t = rng.randint(0, ph) if self.pad_random and ph else 0
+            l = rng.randint(0, pw) if self.pad_random and pw else 0
+            img = np.pad(img, ((t, ph - t), (l, pw - l)), mode="edge")
+            lab = np.pad(lab, ((t, ph - t), (l, pw - l)), mode="constant", constant_values=VOID)
         H, W = img.shape
         y0, x0 = rng.randint(0, H - ch), rng.randint(0, W - cw)
         img = img[y0:y0 + ch, x0:x0 + cw]

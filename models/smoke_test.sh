@@ -2,7 +2,8 @@
 # Smoke test of the whole Python path on one CPU thread (~1 minute): a few training iterations on
 # 8 images (ClassMix and the weight average on one variant), a checkpoint split into pieces and
 # joined, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check; the
-# dynamic mask's operating points on the held-out sequence; the training-only IBN variant;
+# dynamic mask's operating points on the held-out sequence; crops that take turns by epoch and the
+# KITTI-shape evaluation; the training-only IBN variant;
 # KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
 # ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from.
 # Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
@@ -44,6 +45,25 @@ assert r['images'] == 101 and all(0 <= v <= 1 for p in pts for v in p.values()),
 rec = [p['recall'] for p in r['p_dynamic_above'].values()]
 assert rec == sorted(rec, reverse=True), rec
 print('dynamic-mask operating points: %d, on %d held-out images' % (len(pts), r['images']))"
+# Crops that take turns by epoch (square, then KITTI-shaped, the image placed anywhere in a
+# larger crop), and the KITTI-shape evaluation (shape_eval.py) on the result.
+python3 train.py --variant bottleneck --epochs 2 --max-iters 4 --batch 4 --crop 128x128 64x224 --pad-random \
+  --limit-images 8 --limit-val 4 --threads 1 --out $out/mixcrop
+python3 -c "
+import sys; sys.path.insert(0, '.')
+import camvid
+ds = camvid.CamVid('train', crop=[(128, 128), (64, 224)], pad_random=True, limit=2)
+shapes = [tuple(ds[(e, 0)][0].shape) for e in range(4)]
+assert shapes == [(1, 128, 128), (1, 64, 224)] * 2, shapes
+print('crops take turns by epoch:', shapes)"
+python3 shape_eval.py $out/mixcrop/last.pt --scales 1 --tall 256 --json $out/shape.json > $out/shape.log
+python3 -c "
+import json
+r = json.load(open('$out/shape.json'))
+e = next(iter(r['runs'].values()))['eval']
+assert r['frames'] == 101 and set(e) == {'whole', 'ctx@1', 'kitti@1', 'tall256@1'}, e.keys()
+assert all(0 <= m['miou'] <= 1 for m in e.values())
+print('shape_eval modes:', sorted(e))"
 # The IBN experiment's variant (instance normalisation in the LDS) trains, and export.py refuses
 # it by name: the int8 core has no instance normalisation.
 # --zero-init-residual starts its six residual blocks as the identity.

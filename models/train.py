@@ -51,8 +51,12 @@ def get_args(argv=None):
     p.add_argument("--wd", type=float, default=None, help="default 4e-5 (sgd) / 1e-2 (adamw)")
     p.add_argument("--poly-power", type=float, default=0.9)
     p.add_argument("--warmup-iters", type=int, default=200)
-    p.add_argument("--crop", type=parse_hw, default=(384, 384), help="HxW training crop")
+    p.add_argument("--crop", type=parse_hw, nargs="+", default=[(384, 384)],
+                   help="HxW training crop; several shapes (e.g. 384x384 192x640) take turns by epoch")
     p.add_argument("--scale", type=float, nargs=2, default=(0.5, 2.0))
+    p.add_argument("--pad-random", action="store_true",
+                   help="place a scaled image smaller than the crop anywhere in it (default: top left); "
+                        "for wide, KITTI-shaped crops such as 192x640")
     p.add_argument("--class-weights", choices=["none", "enet"], default="none",
                    help="enet: w_c = 1/ln(1.02 + p_c) from train label frequencies")
     p.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "runs", "default"))
@@ -278,9 +282,9 @@ def main(argv=None):
             except ValueError as e:
                 raise SystemExit(f"--synth: {e}")
         print(f"training set: {n_camvid} CamVid + {len(train_items) - n_camvid} synthetic frames", flush=True)
-    train_ds = camvid.CamVid("train", a.data, crop=a.crop, limit=a.limit_images or None,
+    train_ds = camvid.CamVid("train", a.data, crop=a.crop[0] if len(a.crop) == 1 else a.crop, limit=a.limit_images or None,
                              scale=tuple(a.scale), seed=a.seed, items=train_items,
-                             strong=a.aug == "strong")
+                             strong=a.aug == "strong", pad_random=a.pad_random)
     # Selection set: the held-out sequence when there is one, else CamVid val.
     val_ds = camvid.CamVid("val", a.data, limit=a.limit_val or None,
                            items=sel_items if a.holdout_seq else None)
