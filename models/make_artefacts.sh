@@ -8,7 +8,8 @@
 # images), <stem>.export.json and <stem>.slm (the core's blob, from `semloc convert`).
 # Usage: bash models/make_artefacts.sh CHECKPOINT VARIANT [SEMLOC_BINARY]
 # Env: SIZES (default "192x640 256x832 384x1248 384x480"), ARTEFACTS (the output folder, default
-# models/artefacts): judge_on_clips.sh builds a candidate's 192x640 blob with them.
+# models/artefacts), CALIB (calibration images, default 64): judge_on_clips.sh builds a
+# candidate's 192x640 blob with them, and its null network with CALIB=65.
 set -euo pipefail
 ckpt=$1; variant=$2; semloc=${3:-target/release/semloc}
 here=$(cd "$(dirname "$0")" && pwd)
@@ -18,6 +19,6 @@ mkdir -p "${ARTEFACTS:=$here/artefacts}"
 for size in ${SIZES:-192x640 256x832 384x1248 384x480}; do
   stem=$ARTEFACTS/fastscnn_${short}_${size}
   python3 "$here/export.py" --checkpoint "$ckpt" --variant "$variant" --size "$size" --out "$stem.onnx"
-  python3 "$here/quantise.py" --checkpoint "$ckpt" --variant "$variant" --onnx "$stem.onnx" --calib 64
+  python3 "$here/quantise.py" --checkpoint "$ckpt" --variant "$variant" --onnx "$stem.onnx" --calib "${CALIB:-64}"
   "$semloc" convert --onnx "$stem.onnx" --quant "$stem.quant.json" --out "$stem.slm"
 done
