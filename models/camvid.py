@@ -112,6 +112,11 @@ def pad_to_multiple(img, lab, m=32, img_fill="edge"):
     return img, lab
 
 
+def to_input(img):
+    """A luma image (H x W, 0..255) as the network's 1 x H x W input, luma / 255."""
+    return torch.from_numpy(np.ascontiguousarray(img, dtype=np.float32) / 255.0)[None]
+
+
 class CamVid(torch.utils.data.Dataset):
     """split 'train' (augmented random crops) or 'val' (whole images, padded to a multiple of 32).
 
@@ -133,7 +138,6 @@ class CamVid(torch.utils.data.Dataset):
         if limit:
             self.items = self.items[:limit]
         self.crops = [tuple(crop)] if isinstance(crop[0], int) else [tuple(c) for c in crop]
-        self.crop = self.crops[0]
         self.augment = (split == "train") if augment is None else augment
         self.scale = scale
         self.seed = seed
@@ -165,7 +169,7 @@ class CamVid(torch.utils.data.Dataset):
             img, lab = self._augment(img, lab, rng, self.crops[epoch % len(self.crops)])
         else:
             img, lab = pad_to_multiple(img, lab)
-        x = torch.from_numpy(np.ascontiguousarray(img, dtype=np.float32) / 255.0)[None]
+        x = to_input(img)
         y = torch.from_numpy(np.ascontiguousarray(lab).astype(np.int64))
         return x, y
 

@@ -36,9 +36,8 @@ from export import load_model, parse_hw  # noqa: E402
 
 
 def predict(model, img):
-    x = torch.from_numpy(np.ascontiguousarray(img, dtype=np.float32) / 255.0)[None, None]
     with torch.no_grad():
-        return model(x).argmax(1)[0]
+        return model(camvid.to_input(img)[None]).argmax(1)[0]
 
 
 def evaluate(model, items, scales, canvas, tall=()):

@@ -282,7 +282,7 @@ def main(argv=None):
             except ValueError as e:
                 raise SystemExit(f"--synth: {e}")
         print(f"training set: {n_camvid} CamVid + {len(train_items) - n_camvid} synthetic frames", flush=True)
-    train_ds = camvid.CamVid("train", a.data, crop=a.crop[0] if len(a.crop) == 1 else a.crop, limit=a.limit_images or None,
+    train_ds = camvid.CamVid("train", a.data, crop=a.crop, limit=a.limit_images or None,
                              scale=tuple(a.scale), seed=a.seed, items=train_items,
                              strong=a.aug == "strong", pad_random=a.pad_random)
     # Selection set: the held-out sequence when there is one, else CamVid val.
