@@ -11,14 +11,16 @@
 #   ref   the committed models/artefacts/fastscnn_r2_192x640.slm.
 # Each runs `semloc ablate --semantics full,motion --assoc em --align sim3` from 13 starts of the
 # KITTI 01 and 06 clips (frames 0-24:2) and 9 of drive 0005 (0-40:5). Then `semloc compare`
-# prints, per clip, null / ref and cand / ref paired per start (the JSON beside it).
-# The ref and null runs are kept in OUTDIR and reused, so several candidates can be judged one
+# prints, per clip, null / ref and cand / ref paired per start, then ref, null and cand against the
+# backbone (off/hard, run once into OUTDIR/base-*) from the same starts (the JSONs beside them:
+# compare-*.json and cmpbase-*.json).
+# The backbone, ref and null runs are kept in OUTDIR and reused, so several candidates can be judged one
 # after another into one OUTDIR; each candidate's runs and comparisons replace the previous one's.
 # Usage: bash models/judge_on_clips.sh CHECKPOINT VARIANT OUTDIR [SEMLOC_BINARY]
 # VARIANT is read as export.py reads it: a checkpoint of train.py records its own, which wins.
 # Env: SEMLOC_DATA (default ../shared/data beside the checkout). Needs a release build of semloc
 # (default target/release/semloc) and models/'s Python. About 3 minutes per network on 2 cores
-# (9 minutes the first time, with ref and null).
+# (about 10 minutes the first time, with the backbone, ref and null).
 set -euo pipefail
 ckpt=$1; variant=$2; out=$3
 here=$(cd "$(dirname "$0")" && pwd)
@@ -45,8 +47,10 @@ slm() {
 blob() { ls "$out/$1"/fastscnn_*_192x640.slm; }
 
 # ablate NAME SLM: the three clips' runs in $out/NAME-{01,06,0005}, skipped where they exist.
+# SLM "-" runs the backbone (off/hard) instead, with no network.
 ablate() {
   local rows=(--semantics full,motion --assoc em --model "$2" --align sim3 --force) c src starts
+  [ "$2" = - ] && rows=(--semantics off --assoc hard --align sim3 --force)
   for c in 01 06 0005; do
     [ -f "$out/$1-$c/ablation.json" ] && continue
     case $c in
@@ -66,6 +70,7 @@ fi
 rm -rf "$out/cand"
 slm cand "$ckpt" "$variant"
 rm -rf "$out"/cand-01 "$out"/cand-06 "$out"/cand-0005
+ablate base -
 ablate ref "$committed.slm"
 ablate null "$(blob null)"
 ablate cand "$(blob cand)"
@@ -73,5 +78,12 @@ for c in 01 06 0005; do
   for v in null cand; do
     echo "== $c: $v / ref"
     "$semloc" compare "$out/ref-$c" "$out/$v-$c" --json "$out/compare-$v-$c.json" | grep -E "/em"
+  done
+done
+# The issue's target is against the backbone: never more than 3 % worse on a real clip.
+for c in 01 06 0005; do
+  for v in ref null cand; do
+    echo "== $c: $v / backbone (off/hard)"
+    "$semloc" compare "$out/base-$c" "$out/$v-$c" --against off/hard --json "$out/cmpbase-$v-$c.json" | grep -E "/em"
   done
 done
