@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Smoke test of the whole Python path on one CPU thread (~1 minute): a few training iterations on
-# 8 images (ClassMix and the weight average on one variant), a checkpoint split into pieces and
-# joined, export at 192x624, int8 PTQ with 4 calibration images, onnxruntime cross-check; the
-# dynamic mask's operating points on the held-out sequence; crops that take turns by epoch and the
-# KITTI-shape evaluation; the training-only IBN variant;
-# KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
+# 8 images (ClassMix and the weight average on one variant, the auxiliary losses on the other, and
+# a resume), a checkpoint split into pieces and joined, export at 192x624, int8 PTQ with 4
+# calibration images, onnxruntime cross-check; the dynamic mask's operating points on the held-out
+# sequence; crops that take turns by epoch and the KITTI-shape evaluation; the training-only IBN
+# variant; KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
 # ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from.
 # Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
 # models/requirements.txt). With a semloc binary it also quantises the rebuilt network again
@@ -15,13 +15,25 @@ cd "$(dirname "$0")"
 export OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 out=runs/smoke
 for v in res2net bottleneck; do
-  mix=$([ $v = bottleneck ] && echo "--classmix 0.5 --ema 0.9" || true)
+  mix=$([ $v = bottleneck ] && echo "--classmix 0.5 --ema 0.9" || echo "--aux-weight 0.4")
   python3 train.py --variant $v --epochs 3 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 $mix \
     --eval-every 1 --threads 1 --out $out/$v
   python3 export.py --checkpoint $out/$v/best.pt --size 192x624 --out $out/$v/fastscnn_${v}_192x624.onnx
   python3 quantise.py --checkpoint $out/$v/best.pt --onnx $out/$v/fastscnn_${v}_192x624.onnx \
     --calib 4 --limit-val 4
 done
+# The auxiliary heads (res2net run above) are training only: best.pt exported without them; the
+# run resumes with its heads, and refuses to resume without them.
+python3 train.py --variant res2net --epochs 4 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 \
+  --aux-weight 0.4 --eval-every 1 --threads 1 --resume $out/res2net/last.pt --out $out/res2net | tee $out/aux.log
+grep -q "auxiliary losses on the LDS and GFE outputs, weight 0.4" $out/aux.log
+grep -q "resumed at epoch 3" $out/aux.log
+if python3 train.py --variant res2net --epochs 5 --batch 4 --crop 128x192 --limit-images 8 --limit-val 4 \
+    --threads 1 --resume $out/res2net/last.pt --out $out/res2net 2> $out/aux.err; then
+  echo "train.py resumed a run with auxiliary heads without them" >&2; exit 1
+fi
+grep -q "had auxiliary heads" $out/aux.err
+echo "auxiliary heads: exported without, resumed with, refused without"
 # A checkpoint split into float16 pieces (how a lent machine sends a large teacher back) joins
 # back to the same weights.
 python3 ckpt_pieces.py split $out/bottleneck/best.pt $out/pieces/bn --max-mb 2

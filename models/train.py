@@ -26,6 +26,7 @@ import torch.nn.functional as F
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import camvid  # noqa: E402
 from semloc_models import IGNORE_INDEX, NUM_CLASSES, VARIANTS, build, count_params, zero_init_residual  # noqa: E402
+from semloc_models.fastscnn import AuxHeads  # noqa: E402
 
 
 def parse_hw(s):
@@ -103,7 +104,13 @@ def get_args(argv=None):
                    help="keep an exponential moving average of the weights (and BatchNorm statistics) "
                    "with decay D per iteration (e.g. 0.999; 0 = off); evaluations score both, and "
                    "best.pt is selected on and holds the averaged weights")
+    p.add_argument("--aux-weight", type=float, default=0.0, metavar="W",
+                   help="Fast-SCNN's auxiliary losses: cross-entropy of a small head on the LDS output "
+                   "and one on the GFE's (after the PPM), each weighted W (the Fast-SCNN paper: 0.4; "
+                   "0 = off); training only, the heads are not part of the exported network")
     a = p.parse_args(argv)
+    if a.aux_weight < 0:
+        p.error(f"--aux-weight {a.aux_weight}: must be >= 0")
     if not 0.0 <= a.ema < 1.0:
         p.error(f"--ema {a.ema}: the decay must be in [0, 1)")
     return a
@@ -339,6 +346,20 @@ def main(argv=None):
         teachers.append(tm.to(device).eval().requires_grad_(False))
         print(f"teacher {path}: {t.get('variant')} selected at epoch {t.get('epoch')}, "
               f"mIoU {t.get('metrics', {}).get('miou', float('nan')) * 100:.2f}", flush=True)
+    aux = None
+    if a.aux_weight > 0:
+        if not (hasattr(model, "lds") and hasattr(model, "ppm")):
+            raise SystemExit(f"--aux-weight: the {a.variant} variant has no LDS and PPM to put auxiliary heads on")
+        # After the EMA copy, so that the copy does not carry the hooks.
+        aux = AuxHeads(model).to(device)
+        if resume is not None:
+            if "aux" not in resume:
+                raise SystemExit(f"--resume {a.resume}: the run had no auxiliary heads (--aux-weight)")
+            aux.load_state_dict(resume["aux"])
+        print(f"auxiliary losses on the LDS and GFE outputs, weight {a.aux_weight} "
+              f"({count_params(aux):,} training-only parameters)", flush=True)
+    elif resume is not None and "aux" in resume:
+        raise SystemExit(f"--resume {a.resume}: the run had auxiliary heads; give its --aux-weight again")
     nparams = count_params(model)
     print(f"variant={a.variant} params={nparams:,} device={device} train={len(train_ds)} val={len(val_ds)}",
           flush=True)
@@ -350,7 +371,7 @@ def main(argv=None):
         print("class weights", [round(float(w), 2) for w in weight], flush=True)
 
     decay, no_decay = [], []
-    for n, p_ in model.named_parameters():
+    for n, p_ in list(model.named_parameters()) + (list(aux.named_parameters()) if aux is not None else []):
         (no_decay if p_.ndim <= 1 else decay).append(p_)
     groups = [{"params": decay, "weight_decay": wd}, {"params": no_decay, "weight_decay": 0.0}]
     if a.optim == "sgd":
@@ -393,12 +414,17 @@ def main(argv=None):
                 x, y = classmix(x, y, mix_gen, a.classmix)
             with torch.autocast("cuda", dtype=torch.bfloat16, enabled=a.amp and device.type == "cuda"):
                 logits = model(x)
-            if (y != IGNORE_INDEX).any():
+                aux_logits = aux(tuple(x.shape[2:])) if aux is not None else []
+            labelled = bool((y != IGNORE_INDEX).any())
+            if labelled:
                 loss = F.cross_entropy(logits.float(), y, weight=weight, ignore_index=IGNORE_INDEX)
             else:  # all-void crop: no gradient (plain CE would be 0/0 = NaN)
                 loss = logits.float().sum() * 0.0
             if teachers:
                 loss = (1.0 - a.kd_alpha) * loss + a.kd_alpha * distill_loss(logits, teachers, x, a)
+            for al in aux_logits:  # on the labels only, beside the distillation term
+                loss = loss + (a.aux_weight * F.cross_entropy(al.float(), y, weight=weight, ignore_index=IGNORE_INDEX)
+                               if labelled else al.float().sum() * 0.0)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -464,6 +490,8 @@ def main(argv=None):
                  "args": {k: v for k, v in vars(a).items()}}
         if ema is not None:
             state.update(ema=ema.model.state_dict(), ema_updates=ema.updates)
+        if aux is not None:
+            state.update(aux=aux.state_dict())
         torch.save(state, os.path.join(a.out, "last.pt.tmp"))
         os.replace(os.path.join(a.out, "last.pt.tmp"), os.path.join(a.out, "last.pt"))
         summary = {

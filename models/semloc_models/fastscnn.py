@@ -277,6 +277,35 @@ class FastSCNN(nn.Module):
         return y
 
 
+class AuxHeads(nn.Module):
+    """Fast-SCNN's auxiliary losses (Poudel et al. 2019, section 4.1: "at the end of the learning
+    to downsample and the global feature extraction modules", weight 0.4): a small head (3x3
+    ConvBN to 32 channels, dropout, 1x1 conv to the classes) on the LDS output and on the GFE's
+    (after the PPM). Training only: the heads live outside the model, read its features through
+    forward hooks, and are never exported, so the deployed network is unchanged."""
+
+    def __init__(self, model, num_classes=NUM_CLASSES, dropout=0.1):
+        super().__init__()
+        self.heads = nn.ModuleList(
+            nn.Sequential(ConvBN(c, 32, 3), nn.Dropout(dropout), nn.Conv2d(32, num_classes, 1))
+            for c in (64, 128))
+        self._feats = {}
+        self._hooks = [mod.register_forward_hook(self._keep(i)) for i, mod in enumerate((model.lds, model.ppm))]
+
+    def _keep(self, i):
+        def hook(_module, _inputs, out):
+            self._feats[i] = out
+        return hook
+
+    def forward(self, size):
+        """Logits of both heads at `size` for the features of the model's last forward pass."""
+        if len(self._feats) != len(self.heads):
+            raise RuntimeError("AuxHeads: the model has not run a forward pass since the last call")
+        out = [upsample(h(self._feats[i]), size) for i, h in enumerate(self.heads)]
+        self._feats.clear()  # release the activations; each call needs a fresh forward pass
+        return out
+
+
 def count_params(model):
     return sum(p.numel() for p in model.parameters())
 
