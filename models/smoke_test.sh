@@ -5,7 +5,8 @@
 # calibration images, onnxruntime cross-check; the dynamic mask's operating points on the held-out
 # sequence; crops that take turns by epoch and the KITTI-shape evaluation; the training-only IBN
 # variant; KITTI pseudo-labels and a fine-tune with them; the deployed network rebuilt from its committed
-# ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from.
+# ONNX (onnx_to_checkpoint.py) and exported again, with the same outputs, and fine-tuned from; a
+# class boost applied and an unknown class refused.
 # Run from anywhere: bash models/smoke_test.sh [SEMLOC_BINARY]   (needs: pip install -r
 # models/requirements.txt). With a semloc binary it also quantises the rebuilt network again
 # (64 calibration images) and checks that the .slm is byte for byte the committed one.
@@ -34,6 +35,15 @@ if python3 train.py --variant res2net --epochs 5 --batch 4 --crop 128x192 --limi
 fi
 grep -q "had auxiliary heads" $out/aux.err
 echo "auxiliary heads: exported without, resumed with, refused without"
+# --class-boost multiplies chosen classes' loss weights; a class that does not exist is refused.
+python3 train.py --variant res2net --epochs 1 --max-iters 1 --batch 2 --crop 128x192 --limit-images 2 \
+  --limit-val 2 --class-boost car=2 pedestrian=1.5 --threads 1 --out $out/boost | tee $out/boost.log
+grep -qF "class weights [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 1.5, 1.0]" $out/boost.log
+if python3 train.py --class-boost lorry=2 --out $out/boost 2> $out/boost.err; then
+  echo "train.py accepted --class-boost for a class that does not exist" >&2; exit 1
+fi
+grep -q "expected CLASS=FACTOR" $out/boost.err
+echo "class boost: applied, unknown class refused"
 # A checkpoint split into float16 pieces (how a lent machine sends a large teacher back) joins
 # back to the same weights.
 python3 ckpt_pieces.py split $out/bottleneck/best.pt $out/pieces/bn --max-mb 2

@@ -34,6 +34,23 @@ def parse_hw(s):
     return int(h), int(w)
 
 
+def parse_class_boost(items):
+    """["car=2", "pedestrian=1.5"] -> {"car": 2.0, "pedestrian": 1.5}; ValueError naming the bad item."""
+    out = {}
+    for item in items:
+        name, sep, val = item.partition("=")
+        if not sep or name not in camvid.CLASSES:
+            raise ValueError(f"--class-boost {item!r}: expected CLASS=FACTOR with CLASS one of {', '.join(camvid.CLASSES)}")
+        try:
+            f = float(val)
+        except ValueError:
+            f = float("nan")
+        if not (f > 0 and f < float("inf")):
+            raise ValueError(f"--class-boost {item!r}: FACTOR must be a positive finite number")
+        out[name] = f
+    return out
+
+
 def get_args(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--variant", choices=list(VARIANTS), default="res2net",
@@ -60,6 +77,8 @@ def get_args(argv=None):
                         "for wide, KITTI-shaped crops such as 192x640")
     p.add_argument("--class-weights", choices=["none", "enet"], default="none",
                    help="enet: w_c = 1/ln(1.02 + p_c) from train label frequencies")
+    p.add_argument("--class-boost", nargs="+", default=[], metavar="CLASS=F",
+                   help="multiply the loss weight of CLASS by F (on top of --class-weights), e.g. car=2")
     p.add_argument("--out", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "runs", "default"))
     p.add_argument("--device", choices=["auto", "cpu", "cuda"], default="auto")
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
@@ -113,6 +132,10 @@ def get_args(argv=None):
         p.error(f"--aux-weight {a.aux_weight}: must be >= 0")
     if not 0.0 <= a.ema < 1.0:
         p.error(f"--ema {a.ema}: the decay must be in [0, 1)")
+    try:
+        a.class_boost = parse_class_boost(a.class_boost)
+    except ValueError as e:
+        p.error(str(e))
     return a
 
 
@@ -368,6 +391,12 @@ def main(argv=None):
     if a.class_weights == "enet":
         freq = camvid.class_frequencies(train_ds)
         weight = torch.tensor(1.0 / np.log(1.02 + freq), dtype=torch.float32, device=device)
+        print("class weights", [round(float(w), 2) for w in weight], flush=True)
+    if a.class_boost:
+        if weight is None:
+            weight = torch.ones(len(camvid.CLASSES), dtype=torch.float32, device=device)
+        for c, f in a.class_boost.items():
+            weight[camvid.CLASSES.index(c)] *= f
         print("class weights", [round(float(w), 2) for w in weight], flush=True)
 
     decay, no_decay = [], []
