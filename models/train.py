@@ -47,6 +47,8 @@ def parse_class_boost(items):
             f = float("nan")
         if not (f > 0 and f < float("inf")):
             raise ValueError(f"--class-boost {item!r}: FACTOR must be a positive finite number")
+        if name in out:
+            raise ValueError(f"--class-boost {item!r}: {name} is given twice")
         out[name] = f
     return out
 
