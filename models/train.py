@@ -44,8 +44,8 @@ def parse_class_boost(items):
         try:
             f = float(val)
         except ValueError:
-            f = float("nan")
-        if not (f > 0 and f < float("inf")):
+            f = -1.0
+        if not (math.isfinite(f) and f > 0):
             raise ValueError(f"--class-boost {item!r}: FACTOR must be a positive finite number")
         if name in out:
             raise ValueError(f"--class-boost {item!r}: {name} is given twice")
@@ -393,12 +393,12 @@ def main(argv=None):
     if a.class_weights == "enet":
         freq = camvid.class_frequencies(train_ds)
         weight = torch.tensor(1.0 / np.log(1.02 + freq), dtype=torch.float32, device=device)
-        print("class weights", [round(float(w), 2) for w in weight], flush=True)
     if a.class_boost:
         if weight is None:
             weight = torch.ones(len(camvid.CLASSES), dtype=torch.float32, device=device)
         for c, f in a.class_boost.items():
             weight[camvid.CLASSES.index(c)] *= f
+    if weight is not None:
         print("class weights", [round(float(w), 2) for w in weight], flush=True)
 
     decay, no_decay = [], []
