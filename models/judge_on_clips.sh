@@ -16,11 +16,19 @@
 # compare-*.json and cmpbase-*.json).
 # The backbone, ref and null runs are kept in OUTDIR and reused, so several candidates can be judged one
 # after another into one OUTDIR; each candidate's runs and comparisons replace the previous one's.
+# Calibration draws: on these clips the int8 calibration alone moves a network's figures as much as
+# its training draw does (models/README.md, "Calibration draws"), so by default both the committed
+# float weights and the candidate are also calibrated on 65, 66 and 67 images (DRAWS, default
+# "65 66 67"; DRAWS="" judges the one draw only) and run (refK, candK; the committed weights' 65 are
+# the null's runs), and draws_compare.py pairs the candidate with the committed network start by
+# start over all their draws (64 and DRAWS), each also against the backbone with every draw's
+# figure and their spread (OUTDIR/draws-*.json).
 # Usage: bash models/judge_on_clips.sh CHECKPOINT VARIANT OUTDIR [SEMLOC_BINARY]
 # VARIANT is read as export.py reads it: a checkpoint of train.py records its own, which wins.
 # Env: SEMLOC_DATA (default ../shared/data beside the checkout). Needs a release build of semloc
-# (default target/release/semloc) and models/'s Python. About 3 minutes per network on 2 cores
-# (about 10 minutes the first time, with the backbone, ref and null).
+# (default target/release/semloc) and models/'s Python. About 3 minutes per network and draw on
+# 2 cores: about 12 minutes per candidate with the default draws (about 30 minutes the first time,
+# with the backbone, ref, null and the committed weights' other draws).
 set -euo pipefail
 ckpt=$1; variant=$2; out=$3
 here=$(cd "$(dirname "$0")" && pwd)
@@ -67,13 +75,29 @@ if ! blob null > /dev/null 2>&1; then
     > "$out/null.rebuild.log" 2>&1 || { echo "judge_on_clips: rebuilding the committed network failed, see $out/null.rebuild.log" >&2; exit 1; }
   slm null "$out/null.pt" res2net 65
 fi
-rm -rf "$out/cand"
+draws=(${DRAWS-65 66 67})
+for k in "${draws[@]}"; do
+  [[ $k =~ ^[0-9]+$ && $k -ge 1 && $k != 64 ]] || {
+    echo "judge_on_clips: DRAWS: '$k' is not a number of calibration images other than 64" >&2; exit 1; }
+done
+rm -rf "$out"/cand "$out"/cand[0-9]* "$out"/cand-01 "$out"/cand-06 "$out"/cand-0005
 slm cand "$ckpt" "$variant"
-rm -rf "$out"/cand-01 "$out"/cand-06 "$out"/cand-0005
 ablate base -
 ablate ref "$committed.slm"
 ablate null "$(blob null)"
 ablate cand "$(blob cand)"
+# draw_runs SIDE K: the name of SIDE's runs calibrated on K images (ref's 65 are the null's).
+draw_runs() {
+  if [ "$1" = ref ] && [ "$2" = 65 ]; then echo null; else echo "$1$2"; fi
+}
+for k in "${draws[@]}"; do
+  if [ "$(draw_runs ref "$k")" != null ]; then
+    blob "ref$k" > /dev/null 2>&1 || slm "ref$k" "$out/null.pt" res2net "$k"
+    ablate "ref$k" "$(blob "ref$k")"
+  fi
+  slm "cand$k" "$ckpt" "$variant" "$k"
+  ablate "cand$k" "$(blob "cand$k")"
+done
 for c in 01 06 0005; do
   for v in null cand; do
     echo "== $c: $v / ref"
@@ -87,3 +111,13 @@ for c in 01 06 0005; do
     "$semloc" compare "$out/base-$c" "$out/$v-$c" --against off/hard --json "$out/cmpbase-$v-$c.json" | grep -E "/em"
   done
 done
+if [ ${#draws[@]} -gt 0 ]; then
+  # Over the calibration draws: the candidate against the committed network, and each against the backbone.
+  for c in 01 06 0005; do
+    refs=("$out/ref-$c") cands=("$out/cand-$c")
+    for k in "${draws[@]}"; do refs+=("$out/$(draw_runs ref "$k")-$c"); cands+=("$out/cand$k-$c"); done
+    echo "== $c: over calibration draws 64 ${draws[*]}"
+    python3 "$here/draws_compare.py" --ref "${refs[@]}" --cand "${cands[@]}" --base "$out/base-$c" \
+      --json "$out/draws-$c.json" | tail -n +2
+  done
+fi

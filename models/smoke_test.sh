@@ -67,6 +67,31 @@ assert r['images'] == 101 and all(0 <= v <= 1 for p in pts for v in p.values()),
 rec = [p['recall'] for p in r['p_dynamic_above'].values()]
 assert rec == sorted(rec, reverse=True), rec
 print('dynamic-mask operating points: %d, on %d held-out images' % (len(pts), r['images']))"
+# Judging over calibration draws (draws_compare.py): made-up ablation results with known answers.
+python3 -c "
+import json, math, os, subprocess
+d = '$out/draws'; os.makedirs(d, exist_ok=True)
+def run(name, rows, starts=(0, 2, 4), ds='01'):
+    ov = [{'semantics': k.split('/')[0], 'association': k.split('/')[1], 'ate_rmse_m': v} for k, v in rows.items()]
+    json.dump({'dataset': {'name': ds}, 'first_frames': list(starts), 'over_first_frames': ov}, open(f'{d}/{name}.json', 'w'))
+    return f'{d}/{name}.json'
+base = run('base', {'off/hard': [1, 1, 1]})
+r1 = run('r1', {'full/em': [1, 2, 1]}); r2 = run('r2', {'full/em': [1, 0.5, 2]})
+c1 = run('c1', {'full/em': [0.5, 1, 1]})
+cmd = ['python3', 'draws_compare.py', '--rows', 'full/em', '--base', base, '--json', f'{d}/out.json']
+subprocess.run(cmd + ['--ref', r1, r2, '--cand', c1], check=True, stdout=subprocess.DEVNULL)
+e = json.load(open(f'{d}/out.json'))['rows'][0]
+# per start, mean log over draws: ref (0, 0, ln 2 / 2), cand (-ln 2, 0, 0): cand / ref (-ln 2, 0, -ln 2 / 2)
+assert abs(e['cand_vs_ref']['ate_ratio_geomean'] - 2 ** -0.5) < 1e-12, e
+assert e['cand_vs_ref']['better'] == 2 and abs(e['cand_vs_ref']['ate_ratio_worst'] - 1) < 1e-12, e
+assert abs(e['ref_vs_base']['ate_ratio_geomean'] - 2 ** (1 / 6)) < 1e-12, e
+assert [round(v, 12) for v in e['ref_vs_base_per_draw']] == [round(2 ** (1 / 3), 12), 1.0], e
+assert abs(e['ref_draw_spread_log'] - math.log(2) / 3 / math.sqrt(2)) < 1e-12, e
+for bad, why in ((run('s', {'full/em': [1, 1]}, starts=(0, 2)), 'starts'), (run('n', {'motion/em': [1, 1, 1]}), 'no row full/em'),
+                 (run('q', {'full/em': [1, 1, 1]}, ds='06'), 'dataset 06')):
+    p = subprocess.run(cmd + ['--ref', r1, '--cand', bad], capture_output=True, text=True)
+    assert p.returncode == 1 and why in p.stderr and bad in p.stderr, (why, p.stderr)
+print('draws_compare: averages draws per start, refuses runs that do not pair')"
 # Crops that take turns by epoch (square, then KITTI-shaped, the image placed anywhere in a
 # larger crop), and the KITTI-shape evaluation (shape_eval.py) on the result.
 python3 train.py --variant bottleneck --epochs 2 --max-iters 4 --batch 4 --crop 128x128 64x224 --pad-random \
