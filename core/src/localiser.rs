@@ -59,7 +59,7 @@ use crate::nn::model::{Model, ModelError};
 use crate::orb::{
     FrameOrbExtractor, NoWeights, OrbConfig, OrbError, MAX_FRAME_HEIGHT, MAX_FRAME_WIDTH,
 };
-use crate::seg::{weight_image, WeightScheme};
+use crate::seg::{weight_image_with_gain, WeightScheme};
 use crate::stereo::{FrameStereoMatcher, StereoError, StereoMatching, StereoParams, StereoStats};
 use crate::tracker::{FrameReport, Tracker, TrackerError, TrackerParams};
 
@@ -202,10 +202,12 @@ struct SemanticImages {
 }
 
 impl SemanticImages {
-    /// Rebuilds the weight image from the labels (nothing to do without a scheme).
+    /// Rebuilds the weight image from the labels (nothing to do without a scheme), construction
+    /// and object classes weighted `gain` times the other static classes.
     fn build_weights(
         &mut self,
         scheme: Option<WeightScheme>,
+        gain: f32,
         (w, h): (usize, usize),
     ) -> Result<(), LocaliserError> {
         let Some(scheme) = scheme else { return Ok(()) };
@@ -213,13 +215,14 @@ impl SemanticImages {
             ImageView::from_slice(&self.labels[..w * h], w, h).map_err(LocaliserError::Image)?;
         let mut wv = ImageViewMut::from_slice(&mut self.weights[..w * h], w, h)
             .map_err(LocaliserError::Image)?;
-        weight_image(&lv, scheme, &mut wv).map_err(LocaliserError::Image)
+        weight_image_with_gain(&lv, scheme, gain, &mut wv).map_err(LocaliserError::Image)
     }
 
     fn set(
         &mut self,
         labels: &ImageView<'_>,
         scheme: Option<WeightScheme>,
+        gain: f32,
         (w, h): (usize, usize),
     ) -> Result<(), LocaliserError> {
         check_size(labels, (w, h))?;
@@ -227,7 +230,7 @@ impl SemanticImages {
             .map_err(LocaliserError::Image)?;
         dst.copy_from(labels).map_err(LocaliserError::Image)?;
         self.labelled = true;
-        self.build_weights(scheme, (w, h))
+        self.build_weights(scheme, gain, (w, h))
     }
 }
 
@@ -317,7 +320,8 @@ impl Localiser {
     /// # Errors
     /// [`LocaliserError::FrameSize`] when the labels are not the frame's size.
     pub fn set_labels(&mut self, labels: &ImageView<'_>) -> Result<(), LocaliserError> {
-        self.sem.set(labels, self.config.semantics, (self.width, self.height))
+        let gain = self.config.orb.structure_gain;
+        self.sem.set(labels, self.config.semantics, gain, (self.width, self.height))
     }
 
     /// Labels the left frame `left` (`width · height` luma, row-major) with the int8 network
@@ -348,7 +352,8 @@ impl Localiser {
         network.label(left, &mut self.sem.labels[..n])?;
         self.sem.labelled = true;
         self.tracker.set_network_labels(true);
-        self.sem.build_weights(self.config.semantics, (self.width, self.height))
+        let gain = self.config.orb.structure_gain;
+        self.sem.build_weights(self.config.semantics, gain, (self.width, self.height))
     }
 
     /// The current left frame's labels, if any were set.
@@ -365,7 +370,8 @@ impl Localiser {
         self.config.semantics = scheme;
         self.tracker.set_motion_aware(scheme == Some(WeightScheme::Motion));
         if self.sem.labelled {
-            self.sem.build_weights(scheme, (self.width, self.height))?;
+            let gain = self.config.orb.structure_gain;
+            self.sem.build_weights(scheme, gain, (self.width, self.height))?;
         }
         Ok(())
     }
@@ -444,6 +450,7 @@ impl Localiser {
                 ex: &mut self.left,
                 sem: &mut self.sem,
                 scheme: self.config.semantics,
+                gain: self.config.orb.structure_gain,
                 size,
             },
             RightExtraction { ex: &mut self.right, size },
@@ -568,6 +575,7 @@ pub struct LeftExtraction<'a> {
     ex: &'a mut FrameOrbExtractor,
     sem: &'a mut SemanticImages,
     scheme: Option<WeightScheme>,
+    gain: f32,
     size: (usize, usize),
 }
 
@@ -577,7 +585,7 @@ impl LeftExtraction<'_> {
     /// # Errors
     /// [`LocaliserError::FrameSize`] when the labels are not the frame's size.
     pub fn set_labels(&mut self, labels: &ImageView<'_>) -> Result<(), LocaliserError> {
-        self.sem.set(labels, self.scheme, self.size)
+        self.sem.set(labels, self.scheme, self.gain, self.size)
     }
 
     /// ORB on the left image, weighted by class when semantics are on (Eq. 2).

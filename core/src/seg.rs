@@ -10,8 +10,13 @@
 //! Weights are stored as `u8` so a weight image can be handed to the ORB extractor's
 //! `WeightMap` (which reads value/255): ×3 ↦ 255, ×1 ↦ 85, 0 ↦ 0 — only the ratio matters for
 //! ranking. Memory: tables only; [`weight_image`] writes into the caller's buffer.
+//!
+//! The ×3 is the paper's; [`crate::orb::OrbConfig::structure_gain`] sets it per rig (1..=16):
+//! construction and object keep 255 and the other static classes get `round(255 / gain)`
+//! ([`weight_with_gain`], [`weight_image_with_gain`]).
 
 use crate::image::{ImageError, ImageView, ImageViewMut};
+use crate::orb::{MAX_STRUCTURE_GAIN, MIN_STRUCTURE_GAIN, PAPER_STRUCTURE_GAIN};
 
 /// Number of real classes (ids `0..NUM_CLASSES`); [`VOID`] is the "unlabelled" id.
 pub const NUM_CLASSES: usize = 11;
@@ -119,7 +124,35 @@ pub const fn weight(class: u8, scheme: WeightScheme) -> u8 {
     }
 }
 
-/// Writes the weight image of a label image (same size) under `scheme`.
+/// The weight-image value of the static classes other than construction and object when those
+/// are weighted `structure_gain` times as much (they keep 255): `round(255 / structure_gain)`,
+/// 85 for the paper's ×3. A gain outside [`MIN_STRUCTURE_GAIN`]..=[`MAX_STRUCTURE_GAIN`] is
+/// clamped into it, and one that is not a number is the paper's
+/// ([`crate::orb::OrbExtractor::configure`] refuses both).
+pub fn others_weight(structure_gain: f32) -> u8 {
+    let g = if structure_gain.is_nan() {
+        PAPER_STRUCTURE_GAIN
+    } else {
+        structure_gain.clamp(MIN_STRUCTURE_GAIN, MAX_STRUCTURE_GAIN)
+    };
+    // 255 / g is in 15.9..=255; adding 0.5 and truncating rounds it.
+    (255.0 / g + 0.5) as u8
+}
+
+/// Weight of a class under `scheme`, as a weight-image value, with construction and object
+/// classes weighted `structure_gain` times the other static classes ([`weight`] is the paper's
+/// gain, 3). [`WeightScheme::Cull`] weights every static class alike whatever the gain.
+pub fn weight_with_gain(class: u8, scheme: WeightScheme, structure_gain: f32) -> u8 {
+    match (scheme, category(class)) {
+        (WeightScheme::Cull, _) => weight(class, scheme),
+        (_, Category::Construction | Category::Object) => 255,
+        (WeightScheme::Full, Category::Human | Category::Vehicle) => 0,
+        _ => others_weight(structure_gain),
+    }
+}
+
+/// Writes the weight image of a label image (same size) under `scheme`, with the paper's ×3
+/// ([`weight_image_with_gain`] at [`PAPER_STRUCTURE_GAIN`]).
 ///
 /// # Errors
 /// [`ImageError::SizeMismatch`]-style errors from the image module when the sizes differ.
@@ -128,10 +161,25 @@ pub fn weight_image(
     scheme: WeightScheme,
     out: &mut ImageViewMut<'_>,
 ) -> Result<(), ImageError> {
+    weight_image_with_gain(labels, scheme, PAPER_STRUCTURE_GAIN, out)
+}
+
+/// Writes the weight image of a label image (same size) under `scheme`, construction and
+/// object classes weighted `structure_gain` times the other static classes
+/// ([`weight_with_gain`]).
+///
+/// # Errors
+/// [`ImageError::SizeMismatch`]-style errors from the image module when the sizes differ.
+pub fn weight_image_with_gain(
+    labels: &ImageView<'_>,
+    scheme: WeightScheme,
+    structure_gain: f32,
+    out: &mut ImageViewMut<'_>,
+) -> Result<(), ImageError> {
     out.copy_from(labels)?;
     let mut lut = [0u8; 256];
     for (c, w) in lut.iter_mut().enumerate() {
-        *w = weight(c as u8, scheme);
+        *w = weight_with_gain(c as u8, scheme, structure_gain);
     }
     for y in 0..labels.height() {
         for v in out.row_mut(y).iter_mut() {
@@ -170,6 +218,32 @@ mod tests {
         // Motion-aware: dynamic classes are extracted (×1); the tracker decides.
         assert_eq!(weight(8, WeightScheme::Motion), weight(3, WeightScheme::Motion));
         assert_eq!(weight(1, WeightScheme::Motion), orb_weight(1));
+    }
+
+    #[test]
+    fn the_structure_gain_sets_the_ratio() {
+        let schemes = [WeightScheme::Cull, WeightScheme::Full, WeightScheme::Motion];
+        // The paper's gain is `weight` exactly, for every id.
+        for s in schemes {
+            for c in 0..=255u8 {
+                assert_eq!(weight_with_gain(c, s, PAPER_STRUCTURE_GAIN), weight(c, s), "{c} {s:?}");
+            }
+        }
+        // Gain 1: every static class alike, so `full` is `cull`; `motion` weights all alike.
+        for c in 0..=255u8 {
+            assert_eq!(weight_with_gain(c, WeightScheme::Full, 1.0), weight(c, WeightScheme::Cull));
+            assert_eq!(weight_with_gain(c, WeightScheme::Motion, 1.0), 255);
+        }
+        // Between: construction 255, road round(255 / g); dynamic 0 under full.
+        assert_eq!(weight_with_gain(1, WeightScheme::Full, 2.0), 255);
+        assert_eq!(weight_with_gain(3, WeightScheme::Full, 2.0), 128);
+        assert_eq!(weight_with_gain(8, WeightScheme::Full, 2.0), 0);
+        assert_eq!(weight_with_gain(8, WeightScheme::Motion, 2.0), 128);
+        assert_eq!(others_weight(MAX_STRUCTURE_GAIN), 16);
+        // Out of range is clamped, not a number is the paper's (the extractor refuses both).
+        assert_eq!(others_weight(100.0), 16);
+        assert_eq!(others_weight(0.5), 255);
+        assert_eq!(others_weight(f32::NAN), 85);
     }
 
     #[test]

@@ -27,7 +27,9 @@
 
 use std::path::{Path, PathBuf};
 
-use semloc_core::orb::{OrbConfig, KITTI_MAX_FEATURES, MAX_LEVELS};
+use semloc_core::orb::{
+    OrbConfig, KITTI_MAX_FEATURES, MAX_LEVELS, MAX_STRUCTURE_GAIN, MIN_STRUCTURE_GAIN,
+};
 use semloc_core::stereo::StereoMatching;
 use semloc_core::tracker::TrackerParams;
 use serde::{Deserialize, Serialize};
@@ -174,6 +176,7 @@ pub const KEY_DOCS: &[(&str, &str)] = &[
     ("orb.ini_th_fast", "FAST threshold tried first in each cell (iniThFAST), grey levels."),
     ("orb.min_th_fast", "FAST threshold for cells with no corner at ini_th_fast (minThFAST), grey levels, 1..=ini_th_fast."),
     ("orb.quota_rule", "Features per level: \"orbslam2\" (geometric, ratio 1/scale, as ORB-SLAM2's code) or \"area\" (ratio 1/scale², as the papers describe it)."),
+    ("orb.structure_gain", "Semantic ORB (semantics \"full\" and \"motion\"): the Harris weight of construction and object classes against the other static classes, 1..=16 (the paper: 3; 1 weights every static class alike, which makes \"full\" the same as \"cull\")."),
     ("stereo", "Stereo matching along rectified rows (ORB-SLAM2's ComputeStereoMatches)."),
     ("stereo.max_hamming", "Largest descriptor distance of a stereo match, bits (ORB-SLAM2: 75)."),
     ("stereo.sad_half_window", "Half side of the SAD refinement window, px: 5 is an 11x11 window (1..=10)."),
@@ -310,6 +313,15 @@ impl Settings {
             return bad(
                 "orb.min_th_fast",
                 format!("{} must be in 1..=ini_th_fast ({})", o.min_th_fast, o.ini_th_fast),
+            );
+        }
+        if !(MIN_STRUCTURE_GAIN..=MAX_STRUCTURE_GAIN).contains(&o.structure_gain) {
+            return bad(
+                "orb.structure_gain",
+                format!(
+                    "{} is outside {MIN_STRUCTURE_GAIN}..={MAX_STRUCTURE_GAIN}",
+                    o.structure_gain
+                ),
             );
         }
         if let Err(e) = self.stereo.check() {

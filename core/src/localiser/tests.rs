@@ -7,6 +7,7 @@ use std::boxed::Box;
 use std::vec::Vec;
 
 use super::*;
+use crate::orb::PAPER_STRUCTURE_GAIN;
 use crate::seg::WeightScheme;
 use crate::testing::on_big_stack;
 
@@ -268,5 +269,47 @@ fn frames_beyond_the_maximum_are_refused() {
                 })
             );
         }
+    });
+}
+
+/// `orb.structure_gain` reaches the weight image: at 1, `full` extracts exactly what `cull`
+/// does; at the paper's 3 more of the features are on the construction class; out of range,
+/// the localiser refuses it.
+#[test]
+fn the_structure_gain_reaches_the_extractor() {
+    on_big_stack(|| {
+        // Stripes of building (construction) and road 24 px wide, so that the quadtree's nodes
+        // span both.
+        let lab: Vec<u8> =
+            (0..W * H).map(|i| if (i % W / 24).is_multiple_of(2) { 1 } else { 3 }).collect();
+        let lv = ImageView::from_slice(&lab, W, H).unwrap();
+        let (l, r) = pair(0);
+        let run = |scheme: WeightScheme, gain: f32| {
+            let mut c = LocaliserConfig::new(cam(), W as u32, H as u32);
+            c.semantics = Some(scheme);
+            c.orb.structure_gain = gain;
+            // Few features, so the quadtree's nodes hold several candidates to choose from.
+            c.orb.n_features = 150;
+            let mut loc = Box::new(Localiser::new(&c).unwrap());
+            loc.set_labels(&lv).unwrap();
+            loc.process_raw(&l, &r, 0.0, None).unwrap();
+            let f = &loc.frame().features;
+            let xy: Vec<(f32, f32)> = f.iter().map(|f| (f.x, f.y)).collect();
+            let on_building = f.iter().filter(|f| f.class == 1).count();
+            (xy, on_building)
+        };
+        let cull = run(WeightScheme::Cull, PAPER_STRUCTURE_GAIN);
+        let flat = run(WeightScheme::Full, 1.0);
+        let paper = run(WeightScheme::Full, PAPER_STRUCTURE_GAIN);
+        assert_eq!(flat, cull);
+        // The quadtree keeps the strongest weighted corner of each node: where a node spans
+        // both classes, x3 picks the building's.
+        assert!(paper.1 > flat.1, "x3: {} on the building, x1: {}", paper.1, flat.1);
+        let mut c = LocaliserConfig::new(cam(), W as u32, H as u32);
+        c.orb.structure_gain = 0.5;
+        assert_eq!(
+            Localiser::new(&c).err(),
+            Some(LocaliserError::Orb { right: false, err: OrbError::BadStructureGain })
+        );
     });
 }

@@ -103,7 +103,21 @@ pub struct OrbConfig {
     pub min_th_fast: u8,
     /// Per-level quota rule.
     pub quota_rule: QuotaRule,
+    /// Semantic ORB (Eq. 2): the Harris weight of construction and object classes relative to
+    /// the other static classes, in [`MIN_STRUCTURE_GAIN`]..=[`MAX_STRUCTURE_GAIN`] (the paper:
+    /// [`PAPER_STRUCTURE_GAIN`], ×3). Used by the semantic schemes that weight classes
+    /// ([`crate::seg::WeightScheme::Full`] and [`crate::seg::WeightScheme::Motion`]); 1 weights
+    /// every static class alike.
+    pub structure_gain: f32,
 }
+
+/// The paper's Harris weight of construction and object classes (×3, Eq. 2).
+pub const PAPER_STRUCTURE_GAIN: f32 = 3.0;
+/// Smallest [`OrbConfig::structure_gain`]: every static class alike.
+pub const MIN_STRUCTURE_GAIN: f32 = 1.0;
+/// Largest [`OrbConfig::structure_gain`] (the other static classes keep a weight-image value of
+/// at least 16 of 255).
+pub const MAX_STRUCTURE_GAIN: f32 = 16.0;
 
 impl OrbConfig {
     /// ORB-SLAM2's KITTI settings (`KITTI00-02.yaml`): 2000 features, 1.2, 8 levels, 20/7.
@@ -114,6 +128,7 @@ impl OrbConfig {
         ini_th_fast: 20,
         min_th_fast: 7,
         quota_rule: QuotaRule::OrbSlam2,
+        structure_gain: PAPER_STRUCTURE_GAIN,
     };
 
     /// Feature quota of each level (entries past `n_levels` are 0); they sum to `n_features`.
@@ -315,6 +330,9 @@ pub enum OrbError {
     },
     /// `scale_factor` is not a finite number > 1.
     BadScaleFactor,
+    /// `structure_gain` is not a number in
+    /// [`MIN_STRUCTURE_GAIN`]..=[`MAX_STRUCTURE_GAIN`].
+    BadStructureGain,
     /// Thresholds must satisfy `1 <= min_th_fast <= ini_th_fast`.
     BadThresholds {
         /// `ini_th_fast`.
@@ -354,6 +372,10 @@ impl fmt::Display for OrbError {
                 write!(f, "{requested} pyramid levels requested, 1..={MAX_LEVELS} allowed")
             }
             OrbError::BadScaleFactor => write!(f, "scale factor must be finite and > 1"),
+            OrbError::BadStructureGain => write!(
+                f,
+                "structure gain must be a number in {MIN_STRUCTURE_GAIN}..={MAX_STRUCTURE_GAIN}"
+            ),
             OrbError::BadThresholds { ini, min } => {
                 write!(f, "FAST thresholds need 1 <= min ({min}) <= ini ({ini})")
             }
@@ -598,6 +620,9 @@ impl<
         }
         if !(config.scale_factor.is_finite() && config.scale_factor > 1.0) {
             return Err(OrbError::BadScaleFactor);
+        }
+        if !(MIN_STRUCTURE_GAIN..=MAX_STRUCTURE_GAIN).contains(&config.structure_gain) {
+            return Err(OrbError::BadStructureGain);
         }
         if config.min_th_fast == 0 || config.min_th_fast > config.ini_th_fast {
             return Err(OrbError::BadThresholds {

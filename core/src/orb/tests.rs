@@ -92,6 +92,13 @@ fn config_is_validated() {
             Err(OrbError::TooManyFeatures { requested: 5000, cap: 2048 })
         );
         assert!(ext.configure(OrbConfig { scale_factor: 1.0, ..OrbConfig::KITTI }).is_err());
+        for g in [0.99, 16.01, f32::NAN, f32::INFINITY] {
+            let e = ext.configure(OrbConfig { structure_gain: g, ..OrbConfig::KITTI });
+            assert_eq!(e, Err(OrbError::BadStructureGain), "{g}");
+        }
+        for g in [MIN_STRUCTURE_GAIN, PAPER_STRUCTURE_GAIN, MAX_STRUCTURE_GAIN] {
+            ext.configure(OrbConfig { structure_gain: g, ..OrbConfig::KITTI }).unwrap();
+        }
         assert!(ext.configure(OrbConfig { n_levels: 0, ..OrbConfig::KITTI }).is_err());
         assert!(ext.configure(OrbConfig { min_th_fast: 30, ..OrbConfig::KITTI }).is_err());
         ext.configure(OrbConfig::KITTI).unwrap();

@@ -50,7 +50,7 @@ pub struct RunArgs {
     pub ransac_seed: Option<u64>,
     /// Semantic weighting of features: `off` (geometric backbone), `cull` (no features on
     /// dynamic classes), `full` (the paper's semantic ORB: cull dynamic, ×3 construction and
-    /// object classes), `motion` (as full, but features on cars, pedestrians and cyclists are removed
+    /// object classes; the settings file's `orb.structure_gain` sets the ×3), `motion` (as full, but features on cars, pedestrians and cyclists are removed
     /// only where the object is tested moving against the ego-motion). Labels come from the int8 network given with --model, else from the
     /// sequence's `semantic/` folder (ground-truth labels, as `semloc synth` writes them); with
     /// neither it is an error. Default: off, or the settings file's.
