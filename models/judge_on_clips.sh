@@ -76,9 +76,11 @@ if ! blob null > /dev/null 2>&1; then
   slm null "$out/null.pt" res2net 65
 fi
 draws=(${DRAWS-65 66 67})
+seen=" 64 "
 for k in "${draws[@]}"; do
-  [[ $k =~ ^[0-9]+$ && $k -ge 1 && $k != 64 ]] || {
-    echo "judge_on_clips: DRAWS: '$k' is not a number of calibration images other than 64" >&2; exit 1; }
+  [[ $k =~ ^[1-9][0-9]*$ && $seen != *" $k "* ]] || {
+    echo "judge_on_clips: DRAWS: '$k' is not a number of calibration images other than 64 and the other draws" >&2; exit 1; }
+  seen+="$k "
 done
 rm -rf "$out"/cand "$out"/cand[0-9]* "$out"/cand-01 "$out"/cand-06 "$out"/cand-0005
 slm cand "$ckpt" "$variant"
