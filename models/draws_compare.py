@@ -101,11 +101,11 @@ def compare(ref_paths, cand_paths, base_path=None, rows=("full/em", "motion/em")
     out = {"dataset": ref[0]["dataset"], "starts": ref[0]["starts"],
            "ref": [r["file"] for r in ref], "cand": [r["file"] for r in cand],
            "base": base["file"] if base else None, "base_row": base_row if base else None, "rows": []}
+    bl = mean_log([base], base_row) if base else None
     for row in rows:
         rl, cl = mean_log(ref, row), mean_log(cand, row)
         e = {"row": row, "cand_vs_ref": paired(rl, cl)}
         if base:
-            bl = mean_log([base], base_row)
             for side, runs, logs in (("ref", ref, rl), ("cand", cand, cl)):
                 per_draw = [paired(bl, mean_log([r], row)) for r in runs]
                 e[f"{side}_vs_base"] = paired(bl, logs)
