@@ -27,9 +27,7 @@
 
 use std::path::{Path, PathBuf};
 
-use semloc_core::orb::{
-    OrbConfig, KITTI_MAX_FEATURES, MAX_LEVELS, MAX_STRUCTURE_GAIN, MIN_STRUCTURE_GAIN,
-};
+use semloc_core::orb::{OrbConfig, KITTI_MAX_FEATURES};
 use semloc_core::stereo::StereoMatching;
 use semloc_core::tracker::TrackerParams;
 use serde::{Deserialize, Serialize};
@@ -296,33 +294,9 @@ impl Settings {
                 }
             }
         }
-        let o = &self.orb;
-        if o.n_features == 0 || o.n_features > KITTI_MAX_FEATURES {
-            return bad(
-                "orb.n_features",
-                format!("{} is outside 1..={KITTI_MAX_FEATURES}", o.n_features),
-            );
-        }
-        if o.n_levels == 0 || o.n_levels > MAX_LEVELS {
-            return bad("orb.n_levels", format!("{} is outside 1..={MAX_LEVELS}", o.n_levels));
-        }
-        if !(o.scale_factor.is_finite() && o.scale_factor > 1.0) {
-            return bad("orb.scale_factor", format!("{} must be finite and > 1", o.scale_factor));
-        }
-        if o.min_th_fast == 0 || o.min_th_fast > o.ini_th_fast {
-            return bad(
-                "orb.min_th_fast",
-                format!("{} must be in 1..=ini_th_fast ({})", o.min_th_fast, o.ini_th_fast),
-            );
-        }
-        if !(MIN_STRUCTURE_GAIN..=MAX_STRUCTURE_GAIN).contains(&o.structure_gain) {
-            return bad(
-                "orb.structure_gain",
-                format!(
-                    "{} is outside {MIN_STRUCTURE_GAIN}..={MAX_STRUCTURE_GAIN}",
-                    o.structure_gain
-                ),
-            );
+        if let Err(e) = self.orb.check(KITTI_MAX_FEATURES) {
+            let key = e.config_field().map_or_else(|| "orb".to_owned(), |f| format!("orb.{f}"));
+            return bad(&key, e.to_string());
         }
         if let Err(e) = self.stereo.check() {
             return bad("stereo", e.to_string());

@@ -309,7 +309,10 @@ fn the_structure_gain_reaches_the_extractor() {
         c.orb.structure_gain = 0.5;
         assert_eq!(
             Localiser::new(&c).err(),
-            Some(LocaliserError::Orb { right: false, err: OrbError::BadStructureGain })
+            Some(LocaliserError::Orb {
+                right: false,
+                err: OrbError::BadStructureGain { value: 0.5 }
+            })
         );
     });
 }

@@ -131,6 +131,37 @@ impl OrbConfig {
         structure_gain: PAPER_STRUCTURE_GAIN,
     };
 
+    /// Checks every parameter for an extractor that holds at most `max_features` features
+    /// ([`OrbExtractor::configure`] uses its `MAX_KP`; a settings file can check against
+    /// [`KITTI_MAX_FEATURES`] before any extractor exists). The error names the field
+    /// ([`OrbError::config_field`]).
+    ///
+    /// # Errors
+    /// The first of [`OrbError::BadFeatureCount`], [`OrbError::BadLevelCount`],
+    /// [`OrbError::BadScaleFactor`], [`OrbError::BadThresholds`] and
+    /// [`OrbError::BadStructureGain`] that applies.
+    pub fn check(&self, max_features: usize) -> Result<(), OrbError> {
+        if self.n_features == 0 || self.n_features > max_features {
+            return Err(OrbError::BadFeatureCount {
+                requested: self.n_features,
+                cap: max_features,
+            });
+        }
+        if self.n_levels == 0 || self.n_levels > MAX_LEVELS {
+            return Err(OrbError::BadLevelCount { requested: self.n_levels });
+        }
+        if !(self.scale_factor.is_finite() && self.scale_factor > 1.0) {
+            return Err(OrbError::BadScaleFactor { value: self.scale_factor });
+        }
+        if self.min_th_fast == 0 || self.min_th_fast > self.ini_th_fast {
+            return Err(OrbError::BadThresholds { ini: self.ini_th_fast, min: self.min_th_fast });
+        }
+        if !(MIN_STRUCTURE_GAIN..=MAX_STRUCTURE_GAIN).contains(&self.structure_gain) {
+            return Err(OrbError::BadStructureGain { value: self.structure_gain });
+        }
+        Ok(())
+    }
+
     /// Feature quota of each level (entries past `n_levels` are 0); they sum to `n_features`.
     pub fn level_quotas(&self) -> [usize; MAX_LEVELS] {
         level_quotas(self.n_features, self.scale_factor, self.n_levels, self.quota_rule)
@@ -312,12 +343,12 @@ impl<F: Fn(f32, f32) -> f32> WeightMap for FnWeights<F> {
 }
 
 /// Errors of configuration and extraction.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum OrbError {
-    /// `n_features` exceeds the output capacity.
-    TooManyFeatures {
+    /// `n_features` is 0 or exceeds the output capacity.
+    BadFeatureCount {
         /// Requested.
         requested: usize,
         /// Capacity (`MAX_KP`).
@@ -329,10 +360,16 @@ pub enum OrbError {
         requested: usize,
     },
     /// `scale_factor` is not a finite number > 1.
-    BadScaleFactor,
+    BadScaleFactor {
+        /// The value given.
+        value: f32,
+    },
     /// `structure_gain` is not a number in
     /// [`MIN_STRUCTURE_GAIN`]..=[`MAX_STRUCTURE_GAIN`].
-    BadStructureGain,
+    BadStructureGain {
+        /// The value given.
+        value: f32,
+    },
     /// Thresholds must satisfy `1 <= min_th_fast <= ini_th_fast`.
     BadThresholds {
         /// `ini_th_fast`.
@@ -365,16 +402,18 @@ impl From<ImageError> for OrbError {
 impl fmt::Display for OrbError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
-            OrbError::TooManyFeatures { requested, cap } => {
-                write!(f, "{requested} features requested, capacity {cap}")
+            OrbError::BadFeatureCount { requested, cap } => {
+                write!(f, "{requested} features requested, 1..={cap} allowed")
             }
             OrbError::BadLevelCount { requested } => {
                 write!(f, "{requested} pyramid levels requested, 1..={MAX_LEVELS} allowed")
             }
-            OrbError::BadScaleFactor => write!(f, "scale factor must be finite and > 1"),
-            OrbError::BadStructureGain => write!(
+            OrbError::BadScaleFactor { value } => {
+                write!(f, "scale factor {value} must be finite and > 1")
+            }
+            OrbError::BadStructureGain { value } => write!(
                 f,
-                "structure gain must be a number in {MIN_STRUCTURE_GAIN}..={MAX_STRUCTURE_GAIN}"
+                "structure gain {value} is outside {MIN_STRUCTURE_GAIN}..={MAX_STRUCTURE_GAIN}"
             ),
             OrbError::BadThresholds { ini, min } => {
                 write!(f, "FAST thresholds need 1 <= min ({min}) <= ini ({ini})")
@@ -391,6 +430,23 @@ impl fmt::Display for OrbError {
 }
 
 impl core::error::Error for OrbError {}
+
+impl OrbError {
+    /// The [`OrbConfig`] field a configuration error is about (`"n_features"`, ...); `None` for
+    /// errors of a frame.
+    pub fn config_field(&self) -> Option<&'static str> {
+        match self {
+            OrbError::BadFeatureCount { .. } => Some("n_features"),
+            OrbError::BadLevelCount { .. } => Some("n_levels"),
+            OrbError::BadScaleFactor { .. } => Some("scale_factor"),
+            OrbError::BadStructureGain { .. } => Some("structure_gain"),
+            OrbError::BadThresholds { .. } => Some("min_th_fast"),
+            OrbError::FrameTooLarge { .. } | OrbError::TooManyCells { .. } | OrbError::Image(_) => {
+                None
+            }
+        }
+    }
+}
 
 /// Key points and their descriptors (index-aligned), grouped by level in increasing order
 /// unless output overflow replaced weak points, plus the counters of the extraction.
@@ -610,26 +666,13 @@ impl<
         }
     }
 
-    /// Validates `config` against the capacities and makes it current.
+    /// Validates `config` against the capacities ([`OrbConfig::check`] with `MAX_KP`) and makes
+    /// it current.
+    ///
+    /// # Errors
+    /// [`OrbConfig::check`]'s; the current configuration is kept.
     pub fn configure(&mut self, config: OrbConfig) -> Result<(), OrbError> {
-        if config.n_features > MAX_KP {
-            return Err(OrbError::TooManyFeatures { requested: config.n_features, cap: MAX_KP });
-        }
-        if config.n_levels == 0 || config.n_levels > MAX_LEVELS {
-            return Err(OrbError::BadLevelCount { requested: config.n_levels });
-        }
-        if !(config.scale_factor.is_finite() && config.scale_factor > 1.0) {
-            return Err(OrbError::BadScaleFactor);
-        }
-        if !(MIN_STRUCTURE_GAIN..=MAX_STRUCTURE_GAIN).contains(&config.structure_gain) {
-            return Err(OrbError::BadStructureGain);
-        }
-        if config.min_th_fast == 0 || config.min_th_fast > config.ini_th_fast {
-            return Err(OrbError::BadThresholds {
-                ini: config.ini_th_fast,
-                min: config.min_th_fast,
-            });
-        }
+        config.check(MAX_KP)?;
         self.config = config;
         self.quotas = config.level_quotas();
         Ok(())

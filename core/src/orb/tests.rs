@@ -4,6 +4,7 @@
 //! time through the `const fn new`, exactly as firmware would) instead of on a test thread's
 //! stack.
 
+use std::string::ToString;
 use std::sync::Mutex;
 use std::vec::Vec;
 
@@ -85,22 +86,76 @@ fn extractor_size_is_within_budget() {
 }
 
 #[test]
+fn config_check_names_the_field() {
+    let k = OrbConfig::KITTI;
+    assert_eq!(k.check(2000), Ok(()));
+    assert_eq!(k.check(1999), Err(OrbError::BadFeatureCount { requested: 2000, cap: 1999 }));
+    let cases: [(OrbConfig, &str); 5] = [
+        (OrbConfig { n_features: 0, ..k }, "n_features"),
+        (OrbConfig { n_levels: 0, ..k }, "n_levels"),
+        (OrbConfig { scale_factor: f32::NAN, ..k }, "scale_factor"),
+        (OrbConfig { min_th_fast: 21, ..k }, "min_th_fast"),
+        (OrbConfig { structure_gain: 0.0, ..k }, "structure_gain"),
+    ];
+    for (c, field) in cases {
+        let e = c.check(KITTI_MAX_FEATURES).unwrap_err();
+        assert_eq!(e.config_field(), Some(field), "{e}");
+    }
+    // Errors of a frame name no field.
+    assert_eq!(OrbError::FrameTooLarge { width: 1, height: 1 }.config_field(), None);
+    assert_eq!(OrbError::TooManyCells { need: 1 }.config_field(), None);
+    // The messages carry the value given.
+    let e = OrbConfig { structure_gain: 17.5, ..k }.check(KITTI_MAX_FEATURES).unwrap_err();
+    assert_eq!(e.to_string(), "structure gain 17.5 is outside 1..=16");
+    let e = OrbConfig { n_features: 5000, ..k }.check(KITTI_MAX_FEATURES).unwrap_err();
+    assert_eq!(e.to_string(), "5000 features requested, 1..=2048 allowed");
+}
+
+#[test]
 fn config_is_validated() {
     with_ext(|ext| {
-        assert_eq!(
-            ext.configure(OrbConfig { n_features: 5000, ..OrbConfig::KITTI }),
-            Err(OrbError::TooManyFeatures { requested: 5000, cap: 2048 })
-        );
-        assert!(ext.configure(OrbConfig { scale_factor: 1.0, ..OrbConfig::KITTI }).is_err());
+        for n in [0, 2049, 5000] {
+            assert_eq!(
+                ext.configure(OrbConfig { n_features: n, ..OrbConfig::KITTI }),
+                Err(OrbError::BadFeatureCount { requested: n, cap: 2048 })
+            );
+        }
+        for sf in [1.0, 0.5, f32::NAN, f32::INFINITY] {
+            let e = ext.configure(OrbConfig { scale_factor: sf, ..OrbConfig::KITTI });
+            assert!(
+                matches!(e, Err(OrbError::BadScaleFactor { value }) if value.to_bits() == sf.to_bits()),
+                "{sf}"
+            );
+        }
         for g in [0.99, 16.01, f32::NAN, f32::INFINITY] {
             let e = ext.configure(OrbConfig { structure_gain: g, ..OrbConfig::KITTI });
-            assert_eq!(e, Err(OrbError::BadStructureGain), "{g}");
+            assert!(
+                matches!(e, Err(OrbError::BadStructureGain { value }) if value.to_bits() == g.to_bits()),
+                "{g}"
+            );
         }
         for g in [MIN_STRUCTURE_GAIN, PAPER_STRUCTURE_GAIN, MAX_STRUCTURE_GAIN] {
             ext.configure(OrbConfig { structure_gain: g, ..OrbConfig::KITTI }).unwrap();
         }
-        assert!(ext.configure(OrbConfig { n_levels: 0, ..OrbConfig::KITTI }).is_err());
-        assert!(ext.configure(OrbConfig { min_th_fast: 30, ..OrbConfig::KITTI }).is_err());
+        for l in [0, MAX_LEVELS + 1] {
+            assert_eq!(
+                ext.configure(OrbConfig { n_levels: l, ..OrbConfig::KITTI }),
+                Err(OrbError::BadLevelCount { requested: l })
+            );
+        }
+        for (ini, min) in [(20, 30), (20, 0), (0, 0)] {
+            assert_eq!(
+                ext.configure(OrbConfig { ini_th_fast: ini, min_th_fast: min, ..OrbConfig::KITTI }),
+                Err(OrbError::BadThresholds { ini, min })
+            );
+        }
+        ext.configure(OrbConfig { ini_th_fast: 7, min_th_fast: 7, ..OrbConfig::KITTI }).unwrap();
+        // A refused configuration leaves the current one in place.
+        ext.configure(OrbConfig { n_features: 1000, ..OrbConfig::KITTI }).unwrap();
+        assert!(ext
+            .configure(OrbConfig { n_features: 1500, n_levels: 0, ..OrbConfig::KITTI })
+            .is_err());
+        assert_eq!(ext.config().n_features, 1000);
         ext.configure(OrbConfig::KITTI).unwrap();
         let big = vec![0u8; 700 * 10];
         let v = ImageView::from_slice(&big, 700, 10).unwrap();

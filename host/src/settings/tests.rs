@@ -139,6 +139,11 @@ fn out_of_range_values_are_refused_with_their_key() {
             other => panic!("{text}: {other:?}"),
         }
     }
+    // The ORB keys are checked by core's `OrbConfig::check`; the message keeps the value.
+    let e = parse("[orb]\nstructure_gain = 17.0\n").unwrap_err().to_string();
+    assert!(e.contains("rig.toml") && e.contains("orb.structure_gain") && e.contains("17"), "{e}");
+    let e = parse("[orb]\nn_features = 0\n").unwrap_err().to_string();
+    assert!(e.contains("orb.n_features") && e.contains("1..=2048"), "{e}");
 }
 
 #[test]
