@@ -12,6 +12,7 @@ use clap::Args;
 use semloc::dataset::Sequence;
 use semloc::pipeline::{CategoryCounts, Pipeline};
 use semloc::run::{association_name, MovingCheck, Network, RunConfig, RunResult, Semantics};
+use semloc::settings::Settings;
 use semloc_core::assoc::Association;
 use semloc_core::seg::WeightScheme;
 use semloc_core::tracker::TrackerParams;
@@ -628,11 +629,25 @@ fn run_rows_named<'a>(
     Ok(rows)
 }
 
-/// Counts left-image features by category over the first `n` frames, plain and with the
-/// paper's semantic ORB weights.
-fn feature_share(seq: &Sequence, model: Option<&PathBuf>, n: usize) -> Result<Share> {
+/// Counts left-image features by category over the first `n` frames, plain and with semantic
+/// ORB's weights (the `full` scheme), under the run's ORB settings (feature count, pyramid,
+/// thresholds, structure gain): the same extraction as the rows'.
+fn feature_share(
+    seq: &Sequence,
+    model: Option<&PathBuf>,
+    settings: &Settings,
+    n: usize,
+) -> Result<Share> {
     let (w, h) = seq.image_size;
-    let mut pipe = Pipeline::new(&seq.calib, w, h, TrackerParams::default(), 1)?;
+    let mut pipe = Pipeline::with_settings(
+        &seq.calib,
+        w,
+        h,
+        settings.orb,
+        settings.stereo,
+        TrackerParams::default(),
+        1,
+    )?;
     if let Some(p) = model {
         pipe.set_segmenter(semloc::run::load_network(p, w, h)?);
     }
@@ -711,14 +726,15 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         )?;
         per_start.push(more);
     }
-    let share = if labelled { Some(feature_share(seq, args.model.as_ref(), n)?) } else { None };
+    let share =
+        if labelled { Some(feature_share(seq, model.as_ref(), &settings, n)?) } else { None };
 
     let mut text = format!(
         "{} frames of {} ({} thread(s)); labels: {}\n\n",
         n,
         seq.summary().name,
         args.threads,
-        match &args.model {
+        match &model {
             Some(p) => format!("int8 network {}", p.display()),
             None if labelled => "the sequence's semantic/ folder".to_owned(),
             None => "none".to_owned(),
@@ -799,7 +815,7 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         "frames": n,
         "threads": args.threads,
         "seeds": args.seeds,
-        "model": args.model,
+        "model": model,
         "rows": json_rows,
         "feature_share": share,
         "first_frames": first_frames,

@@ -319,6 +319,18 @@ fn ablate_and_bench_kitti_take_a_settings_file() {
     let (with, without) = (dir.path().join("with"), dir.path().join("without"));
     ablate(&with, Some(&cfg));
     ablate(&without, None);
+    // The feature share (Fig. 4) is extracted with the file's ORB settings, as the rows are.
+    let per_frame = |out: &std::path::Path| -> f64 {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap())
+                .unwrap();
+        let s = &v["feature_share"];
+        let plain: u64 =
+            s["plain"].as_object().unwrap().values().map(|n| n.as_u64().unwrap()).sum();
+        plain as f64 / s["frames"].as_f64().unwrap()
+    };
+    let (w, wo) = (per_frame(&with), per_frame(&without));
+    assert!(w < 770.0 && wo > 1000.0, "{w} features per frame with the file, {wo} without");
     for (row, assoc) in [("off-hard", "hard"), ("motion-em", "em")] {
         let (v, d) = (summary(with.join(row)), summary(without.join(row)));
         let p = &v["provenance"];
@@ -572,4 +584,41 @@ fn ablate_without_labels_names_the_missing_folder() {
     let (stdout, err) = text(&o);
     assert!(o.status.success(), "{stdout}\n{err}");
     assert!(stdout.contains("off       em"), "{stdout}");
+}
+
+/// The network named in the settings file labels every row and the feature share (Fig. 4)
+/// alike, on a sequence without labels: the share once asked for a semantic/ folder after the
+/// rows had run, and failed.
+#[test]
+fn ablate_takes_the_network_from_the_settings_file() {
+    let street = crate::common::synth("4", "high", "3");
+    let seq = street.path().join("sequences").join("00");
+    std::fs::remove_dir_all(seq.join("semantic")).unwrap();
+    let model = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../models/artefacts/fastscnn_r2_192x640.slm")
+        .canonicalize()
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("rig.toml");
+    std::fs::write(&cfg, format!("[semantics]\nmodel = {:?}\n", model.to_str().unwrap())).unwrap();
+    let out = dir.path().join("abl");
+    let o = semloc(&[
+        "ablate",
+        street.path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--semantics",
+        "full",
+        "--assoc",
+        "hard",
+        "--config",
+        cfg.to_str().unwrap(),
+    ]);
+    let (stdout, err) = text(&o);
+    assert!(o.status.success(), "{stdout}\n{err}");
+    assert!(stdout.contains("int8 network") && stdout.contains("Fig. 4"), "{stdout}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("ablation.json")).unwrap()).unwrap();
+    assert_eq!(v["model"].as_str(), model.to_str(), "{}", v["model"]);
+    assert_eq!(v["feature_share"]["frames"], 4, "{}", v["feature_share"]);
 }
