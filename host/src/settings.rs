@@ -301,71 +301,8 @@ impl Settings {
         if let Err(e) = self.stereo.check() {
             return bad("stereo", e.to_string());
         }
-        let t = &self.tracker;
-        let positive: [(&str, f64); 7] = [
-            ("tracker.close_depth_baselines", t.close_depth_baselines),
-            ("tracker.wide_radius_px", f64::from(t.wide_radius_px)),
-            ("tracker.narrow_radius_px", f64::from(t.narrow_radius_px)),
-            ("tracker.mono_beyond_baselines", t.mono_beyond_baselines),
-            ("tracker.em.tau_orb", t.em.tau_orb),
-            ("tracker.em.tau_sem", t.em.tau_sem),
-            ("tracker.em.class_prior", t.em.class_prior),
-        ];
-        for (k, v) in positive {
-            let inf_ok = k == "tracker.mono_beyond_baselines";
-            if v.is_nan() || v <= 0.0 || (v.is_infinite() && !inf_ok) {
-                return bad(
-                    k,
-                    format!("{v} must be > 0{}", if inf_ok { "" } else { " and finite" }),
-                );
-            }
-        }
-        let unit: [(&str, f64); 4] = [
-            ("tracker.nn_ratio", f64::from(t.nn_ratio)),
-            ("tracker.keyframe_ratio", f64::from(t.keyframe_ratio)),
-            ("tracker.motion.prior_vehicle", f64::from(t.motion.prior_vehicle)),
-            ("tracker.motion.prior_human", f64::from(t.motion.prior_human)),
-        ];
-        for (k, v) in unit {
-            if !(v > 0.0 && v <= 1.0) {
-                return bad(k, format!("{v} must be in (0, 1]"));
-            }
-        }
-        if !(t.em.min_weight.is_finite() && (0.0..1.0).contains(&t.em.min_weight)) {
-            return bad("tracker.em.min_weight", format!("{} must be in [0, 1)", t.em.min_weight));
-        }
-        for (k, v) in [
-            ("tracker.motion.link_px", t.motion.link_px),
-            ("tracker.motion.link_m", t.motion.link_m),
-            ("tracker.motion.max_frame_llr", t.motion.max_frame_llr),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return bad(k, format!("{v} must be finite and > 0"));
-            }
-        }
-        if !(t.motion.track_px.is_finite() && t.motion.track_px >= 0.0) {
-            return bad(
-                "tracker.motion.track_px",
-                format!("{} must be finite and ≥ 0", t.motion.track_px),
-            );
-        }
-        for (k, v) in [
-            ("tracker.motion.camera_height_m", t.motion.camera_height_m),
-            ("tracker.motion.slow_human_mps", t.motion.slow_human_mps),
-            ("tracker.motion.slow_vehicle_mps", t.motion.slow_vehicle_mps),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return bad(k, format!("{v} must be finite and ≥ 0"));
-            }
-        }
-        if t.keyframe_max_interval == 0 {
-            return bad("tracker.keyframe_max_interval", "must be ≥ 1".into());
-        }
-        if t.ba_keyframes == 0 {
-            return bad("tracker.ba_keyframes", "must be ≥ 1".into());
-        }
-        if t.em.iterations == 0 {
-            return bad("tracker.em.iterations", "must be ≥ 1".into());
+        if let Err(e) = self.tracker.check() {
+            return bad(&format!("tracker.{}", e.field), format!("{} {}", e.value, e.rule));
         }
         Ok(())
     }

@@ -103,6 +103,90 @@ pub struct TrackerParams {
     pub motion: MotionParams,
 }
 
+/// A [`TrackerParams`] value outside its range ([`TrackerParams::check`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BadParam {
+    /// The field's path below the tracker's settings (`"nn_ratio"`, `"em.tau_orb"`,
+    /// `"motion.link_px"`), as the settings file's `[tracker]` keys name it.
+    pub field: &'static str,
+    /// The value given.
+    pub value: f64,
+    /// What it must be (`"must be in (0, 1]"`).
+    pub rule: &'static str,
+}
+
+impl core::fmt::Display for BadParam {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{} = {} {}", self.field, self.value, self.rule)
+    }
+}
+
+impl TrackerParams {
+    /// Checks every value against what the tracker accepts: distances, radii, scales and
+    /// temperatures > 0 (only `mono_beyond_baselines` may be infinite), ratios and priors in
+    /// (0, 1], `em.min_weight` in [0, 1), the motion test's lengths and speeds finite and
+    /// ≥ 0, and at least one keyframe interval, BA keyframe and EM iteration.
+    ///
+    /// # Errors
+    /// The first value out of range, naming its field.
+    pub fn check(&self) -> Result<(), BadParam> {
+        let bad = |field, value: f64, rule| Err(BadParam { field, value, rule });
+        let (em, m) = (&self.em, &self.motion);
+        for (field, v) in [
+            ("close_depth_baselines", self.close_depth_baselines),
+            ("wide_radius_px", f64::from(self.wide_radius_px)),
+            ("narrow_radius_px", f64::from(self.narrow_radius_px)),
+            ("em.tau_orb", em.tau_orb),
+            ("em.tau_sem", em.tau_sem),
+            ("em.class_prior", em.class_prior),
+            ("motion.link_px", f64::from(m.link_px)),
+            ("motion.link_m", f64::from(m.link_m)),
+            ("motion.max_frame_llr", f64::from(m.max_frame_llr)),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(field, v, "must be > 0 and finite");
+            }
+        }
+        if self.mono_beyond_baselines.is_nan() || self.mono_beyond_baselines <= 0.0 {
+            return bad("mono_beyond_baselines", self.mono_beyond_baselines, "must be > 0");
+        }
+        for (field, v) in [
+            ("nn_ratio", f64::from(self.nn_ratio)),
+            ("keyframe_ratio", f64::from(self.keyframe_ratio)),
+            ("motion.prior_vehicle", f64::from(m.prior_vehicle)),
+            ("motion.prior_human", f64::from(m.prior_human)),
+        ] {
+            if !(v > 0.0 && v <= 1.0) {
+                return bad(field, v, "must be in (0, 1]");
+            }
+        }
+        if !(em.min_weight.is_finite() && (0.0..1.0).contains(&em.min_weight)) {
+            return bad("em.min_weight", em.min_weight, "must be in [0, 1)");
+        }
+        for (field, v) in [
+            ("motion.track_px", m.track_px),
+            ("motion.camera_height_m", m.camera_height_m),
+            ("motion.slow_human_mps", m.slow_human_mps),
+            ("motion.slow_vehicle_mps", m.slow_vehicle_mps),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, f64::from(v), "must be finite and ≥ 0");
+            }
+        }
+        for (field, v) in [
+            ("keyframe_max_interval", u64::from(self.keyframe_max_interval)),
+            ("ba_keyframes", self.ba_keyframes as u64),
+            ("em.iterations", u64::from(em.iterations)),
+        ] {
+            if v == 0 {
+                return bad(field, 0.0, "must be ≥ 1");
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Default for TrackerParams {
     fn default() -> Self {
         Self {
@@ -265,7 +349,7 @@ pub struct TrackerStats {
 }
 
 /// Why a tracker cannot be built.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum TrackerError {
@@ -276,6 +360,8 @@ pub enum TrackerError {
         /// Height (px).
         height: u32,
     },
+    /// A parameter is out of its range ([`TrackerParams::check`]).
+    BadParam(BadParam),
 }
 
 impl core::fmt::Display for TrackerError {
@@ -284,6 +370,7 @@ impl core::fmt::Display for TrackerError {
             Self::BadImageSize { width, height } => {
                 write!(f, "image size {width}x{height} is not usable (1..=65535 each)")
             }
+            Self::BadParam(p) => write!(f, "tracker parameter {p}"),
         }
     }
 }
@@ -331,6 +418,10 @@ impl Tracker {
     pub const MEMORY_BYTES: usize = core::mem::size_of::<Tracker>();
 
     /// A tracker for images of `width`x`height` pixels from `cam`.
+    ///
+    /// # Errors
+    /// [`TrackerError::BadImageSize`], or [`TrackerError::BadParam`] for parameters
+    /// [`TrackerParams::check`] refuses.
     pub fn new(
         cam: StereoCamera,
         width: u32,
@@ -340,6 +431,7 @@ impl Tracker {
         if width == 0 || height == 0 || width > 65535 || height > 65535 {
             return Err(TrackerError::BadImageSize { width, height });
         }
+        params.check().map_err(TrackerError::BadParam)?;
         let mut problem = PoseProblem::new();
         problem.far_m = (params.mono_beyond_baselines * cam.baseline_m) as f32;
         Ok(Self {

@@ -189,6 +189,64 @@ fn bad_image_size_is_an_error() {
 }
 
 #[test]
+fn params_out_of_range_are_refused_naming_the_field() {
+    let d = TrackerParams::default();
+    assert_eq!(d.check(), Ok(()));
+    let mut cases: StdVec<(TrackerParams, &str)> = StdVec::new();
+    let mut case = |field: &'static str, f: &dyn Fn(&mut TrackerParams)| {
+        let mut p = d;
+        f(&mut p);
+        cases.push((p, field));
+    };
+    case("close_depth_baselines", &|p| p.close_depth_baselines = 0.0);
+    case("wide_radius_px", &|p| p.wide_radius_px = f32::NAN);
+    case("narrow_radius_px", &|p| p.narrow_radius_px = f32::INFINITY);
+    case("mono_beyond_baselines", &|p| p.mono_beyond_baselines = -1.0);
+    case("mono_beyond_baselines", &|p| p.mono_beyond_baselines = f64::NAN);
+    case("nn_ratio", &|p| p.nn_ratio = 1.5);
+    case("keyframe_ratio", &|p| p.keyframe_ratio = 0.0);
+    case("keyframe_max_interval", &|p| p.keyframe_max_interval = 0);
+    case("ba_keyframes", &|p| p.ba_keyframes = 0);
+    case("em.tau_orb", &|p| p.em.tau_orb = -1.0);
+    case("em.tau_sem", &|p| p.em.tau_sem = 0.0);
+    case("em.class_prior", &|p| p.em.class_prior = f64::NAN);
+    case("em.min_weight", &|p| p.em.min_weight = 1.0);
+    case("em.iterations", &|p| p.em.iterations = 0);
+    case("motion.prior_vehicle", &|p| p.motion.prior_vehicle = 0.0);
+    case("motion.prior_human", &|p| p.motion.prior_human = 1.01);
+    case("motion.link_px", &|p| p.motion.link_px = 0.0);
+    case("motion.link_m", &|p| p.motion.link_m = f32::NAN);
+    case("motion.max_frame_llr", &|p| p.motion.max_frame_llr = -0.5);
+    case("motion.track_px", &|p| p.motion.track_px = -1.0);
+    case("motion.camera_height_m", &|p| p.motion.camera_height_m = f32::NAN);
+    case("motion.slow_human_mps", &|p| p.motion.slow_human_mps = -0.1);
+    case("motion.slow_vehicle_mps", &|p| p.motion.slow_vehicle_mps = f32::INFINITY);
+    for (p, field) in &cases {
+        let e = p.check().unwrap_err();
+        assert_eq!(e.field, *field, "{e}");
+    }
+    // The ends of the ranges are accepted: an infinite mono depth, ratios of 1, zero lengths.
+    let mut edge = d;
+    edge.mono_beyond_baselines = f64::INFINITY;
+    edge.nn_ratio = 1.0;
+    edge.motion.track_px = 0.0;
+    edge.em.min_weight = 0.0;
+    assert_eq!(edge.check(), Ok(()));
+    let e = cases[5].0.check().unwrap_err();
+    assert_eq!(std::format!("{e}"), "nn_ratio = 1.5 must be in (0, 1]");
+    // The tracker itself refuses them: an ECU that fills the parameters in code gets the
+    // same check as a settings file.
+    on_big_stack(move || {
+        for (p, field) in cases {
+            match Tracker::new(cam(), 640, 480, p).err() {
+                Some(TrackerError::BadParam(b)) => assert_eq!(b.field, field),
+                other => panic!("{field}: {other:?}"),
+            }
+        }
+    });
+}
+
+#[test]
 fn tracker_memory_is_reported() {
     std::println!(
         "Tracker: {} bytes ({:.2} MiB)",
