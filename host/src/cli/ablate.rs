@@ -709,8 +709,12 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         .iter()
         .flat_map(|&s| args.assoc.iter().map(move |&a| (s.into(), a.into())))
         .collect();
-    let rows = run_rows_over_seeds(&base, &pairs, &args.out, args.seeds)?;
     let n = base().frame_count();
+    // The feature share (Fig. 4) first: it is quick, and a failure of its own would otherwise
+    // come after every row had run and leave no table.
+    let share =
+        if labelled { Some(feature_share(seq, model.as_ref(), &settings, n)?) } else { None };
+    let rows = run_rows_over_seeds(&base, &pairs, &args.out, args.seeds)?;
     let mut per_start = Vec::new();
     let dir = args.out.join("first-frames");
     for (k, s) in starts.iter().enumerate().skip(1) {
@@ -726,8 +730,6 @@ pub fn run(args: &AblateArgs) -> Result<()> {
         )?;
         per_start.push(more);
     }
-    let share =
-        if labelled { Some(feature_share(seq, model.as_ref(), &settings, n)?) } else { None };
 
     let mut text = format!(
         "{} frames of {} ({} thread(s)); labels: {}\n\n",
