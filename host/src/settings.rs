@@ -27,6 +27,7 @@
 
 use std::path::{Path, PathBuf};
 
+use semloc_core::geom::GeomError;
 use semloc_core::orb::{OrbConfig, KITTI_MAX_FEATURES};
 use semloc_core::stereo::StereoMatching;
 use semloc_core::tracker::TrackerParams;
@@ -265,12 +266,7 @@ impl Settings {
             Err(SettingsError::Invalid { path: path.to_path_buf(), key: key.into(), msg })
         };
         if let Some(c) = &self.camera {
-            for (k, v) in [("fx", c.fx), ("fy", c.fy), ("cx", c.cx), ("cy", c.cy)] {
-                if !v.is_finite() || (k.starts_with('f') && v <= 0.0) {
-                    return bad(&format!("camera.{k}"), format!("{v} must be finite and > 0"));
-                }
-            }
-            match (c.baseline, c.bf) {
+            let (baseline_key, given, unit) = match (c.baseline, c.bf) {
                 (Some(_), Some(_)) => {
                     return bad("camera", "give baseline or bf, not both".into());
                 }
@@ -280,13 +276,30 @@ impl Settings {
                         "the baseline is missing: give baseline (m) or bf (px·m)".into(),
                     )
                 }
-                (Some(b), None) if !(b.is_finite() && b > 0.0) => {
-                    return bad("camera.baseline", format!("{b} m must be finite and > 0"));
-                }
-                (None, Some(bf)) if !(bf.is_finite() && bf > 0.0) => {
-                    return bad("camera.bf", format!("{bf} px·m must be finite and > 0"));
-                }
-                _ => {}
+                (Some(b), None) => ("camera.baseline", b, " m"),
+                (None, Some(bf)) => ("camera.bf", bf, " px·m"),
+            };
+            // Core's rule (`StereoCamera::new`): every value finite, the focal lengths and the
+            // baseline (given, or bf / fx) > 0.
+            if let Err(e) = c.calib().to_camera() {
+                let GeomError::InvalidCamera { field } = e else {
+                    return bad("camera", e.to_string());
+                };
+                return match field {
+                    "fx_px" => bad("camera.fx", format!("{} must be finite and > 0", c.fx)),
+                    "fy_px" => bad("camera.fy", format!("{} must be finite and > 0", c.fy)),
+                    "cx_px" => bad("camera.cx", format!("{} must be finite", c.cx)),
+                    "cy_px" => bad("camera.cy", format!("{} must be finite", c.cy)),
+                    _ if given.is_finite() && given > 0.0 => bad(
+                        baseline_key,
+                        format!(
+                            "{given}{unit} gives a baseline of {} m (bf / fx), which must be \
+                             finite and > 0",
+                            c.calib().baseline_m
+                        ),
+                    ),
+                    _ => bad(baseline_key, format!("{given}{unit} must be finite and > 0")),
+                };
             }
             for (k, v) in [("width", c.width), ("height", c.height)] {
                 if v == Some(0) {

@@ -46,6 +46,62 @@ fn every_key_is_documented_and_every_documented_key_exists() {
     assert_eq!(got, documented);
 }
 
+/// The ranges `KEY_DOCS` writes as literals are core's: a change to a bound in core shows
+/// here rather than as documentation that promises the old range.
+#[test]
+fn documented_ranges_are_the_checked_ranges() {
+    use semloc_core::orb::{
+        MAX_LEVELS, MAX_STRUCTURE_GAIN, MIN_STRUCTURE_GAIN, PAPER_STRUCTURE_GAIN,
+    };
+    use semloc_core::stereo::{MAX_SAD_HALF_WINDOW, MAX_SAD_SEARCH};
+    let doc = |key: &str| KEY_DOCS.iter().find(|(k, _)| *k == key).map(|(_, d)| *d).unwrap();
+    let expect = [
+        ("orb.n_features", format!("at most {KITTI_MAX_FEATURES}")),
+        ("orb.n_levels", format!("1..={MAX_LEVELS}")),
+        ("orb.structure_gain", format!("{MIN_STRUCTURE_GAIN}..={MAX_STRUCTURE_GAIN}")),
+        ("orb.structure_gain", format!("the paper: {PAPER_STRUCTURE_GAIN}")),
+        ("stereo.sad_half_window", format!("(1..={MAX_SAD_HALF_WINDOW})")),
+        ("stereo.sad_search", format!("(2..={MAX_SAD_SEARCH})")),
+    ];
+    for (key, text) in &expect {
+        assert!(doc(key).contains(text.as_str()), "{key}: {text:?} not in {:?}", doc(key));
+    }
+    // The ends the documentation gives are accepted, one past them refused.
+    let s = Settings::default();
+    for (n, ok) in
+        [(1, true), (KITTI_MAX_FEATURES, true), (0, false), (KITTI_MAX_FEATURES + 1, false)]
+    {
+        let mut t = s.clone();
+        t.orb.n_features = n;
+        assert_eq!(t.check(Path::new(P)).is_ok(), ok, "n_features {n}");
+    }
+    for (n, ok) in [(1, true), (MAX_LEVELS, true), (0, false), (MAX_LEVELS + 1, false)] {
+        let mut t = s.clone();
+        t.orb.n_levels = n;
+        assert_eq!(t.check(Path::new(P)).is_ok(), ok, "n_levels {n}");
+    }
+    for (g, ok) in
+        [(MIN_STRUCTURE_GAIN, true), (MAX_STRUCTURE_GAIN, true), (0.99, false), (16.01, false)]
+    {
+        let mut t = s.clone();
+        t.orb.structure_gain = g;
+        assert_eq!(t.check(Path::new(P)).is_ok(), ok, "structure_gain {g}");
+    }
+    for (w, l, ok) in [
+        (1, 2, true),
+        (MAX_SAD_HALF_WINDOW, MAX_SAD_SEARCH, true),
+        (0, 2, false),
+        (MAX_SAD_HALF_WINDOW + 1, 2, false),
+        (1, 1, false),
+        (1, MAX_SAD_SEARCH + 1, false),
+    ] {
+        let mut t = s.clone();
+        t.stereo.sad_half_window = w;
+        t.stereo.sad_search = l;
+        assert_eq!(t.check(Path::new(P)).is_ok(), ok, "sad {w} {l}");
+    }
+}
+
 #[test]
 fn printed_defaults_parse_back_to_the_defaults_and_document_each_key() {
     let text = documented_toml(&Settings::default());
@@ -131,6 +187,11 @@ fn out_of_range_values_are_refused_with_their_key() {
         ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\nbaseline = 1.0\n", "camera"),
         ("[camera]\nfx = -1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\n", "camera.fx"),
         ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbaseline = 0.0\n", "camera.baseline"),
+        ("[camera]\nfx = 1.0\nfy = 0.0\ncx = 1.0\ncy = 1.0\nbf = 1.0\n", "camera.fy"),
+        ("[camera]\nfx = 1.0\nfy = 1.0\ncx = nan\ncy = 1.0\nbf = 1.0\n", "camera.cx"),
+        ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = inf\nbf = 1.0\n", "camera.cy"),
+        ("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = -386.0\n", "camera.bf"),
+        ("[camera]\nfx = 1e-10\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1e308\n", "camera.bf"),
     ] {
         match parse(text) {
             Err(SettingsError::Invalid { key: k, path, .. }) => {
@@ -139,6 +200,16 @@ fn out_of_range_values_are_refused_with_their_key() {
             other => panic!("{text}: {other:?}"),
         }
     }
+    // The camera is checked by core's `StereoCamera::new`; the message keeps the value given.
+    let e = parse("[camera]\nfx = 1.0\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = -386.0\n");
+    let e = e.unwrap_err().to_string();
+    assert!(e.contains("camera.bf") && e.contains("-386 px·m must be finite and > 0"), "{e}");
+    let e = parse("[camera]\nfx = 1e-10\nfy = 1.0\ncx = 1.0\ncy = 1.0\nbf = 1e308\n");
+    let e = e.unwrap_err().to_string();
+    assert!(e.contains("gives a baseline of inf m"), "{e}");
+    // A principal point need only be finite.
+    let s = parse("[camera]\nfx = 1.0\nfy = 1.0\ncx = -5.0\ncy = 0.0\nbaseline = 0.5\n").unwrap();
+    assert_eq!(s.camera.unwrap().cx, -5.0);
     // The ORB keys are checked by core's `OrbConfig::check`; the message keeps the value.
     let e = parse("[orb]\nstructure_gain = 17.0\n").unwrap_err().to_string();
     assert!(e.contains("rig.toml") && e.contains("orb.structure_gain") && e.contains("17"), "{e}");
