@@ -283,6 +283,17 @@ fn nearest_pairs(gt: &[f64], est: &[f64], max_dt: f64) -> Vec<(usize, usize)> {
 /// keep 6 to 9 digits, which leaves ~1e-7; anything near this is not a rotation.
 pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
+/// `Some((largest entry of |RᵀR − I|, det R))` when `rot` is not a rotation: farther from
+/// orthonormal than [`ROTATION_TOLERANCE`], or a reflection (NaN fails too). The rule every
+/// reader of KITTI pose files applies, estimates and ground truth alike.
+pub fn rotation_defect(rot: &Matrix3<f64>) -> Option<(f64, f64)> {
+    let deviation = (rot.transpose() * rot - Matrix3::identity()).amax();
+    let det = rot.determinant();
+    // Written so that NaN is a defect.
+    let ok = deviation <= ROTATION_TOLERANCE && det > 0.0;
+    (!ok).then_some((deviation, det))
+}
+
 /// Parses KITTI pose text; `path` is only used in error messages. `#` starts a comment. A
 /// 3x3 block that is not a rotation ([`ROTATION_TOLERANCE`], or a reflection) is an error.
 pub fn parse_kitti(text: &str, path: &Path) -> Result<Vec<Se3>, TrajError> {
@@ -290,10 +301,7 @@ pub fn parse_kitti(text: &str, path: &Path) -> Result<Vec<Se3>, TrajError> {
     rows.into_iter()
         .map(|(line, n)| {
             let pose = Se3::from_matrix3x4(&Matrix3x4::from_row_slice(&n));
-            let gram = pose.rot.transpose() * pose.rot - Matrix3::identity();
-            let deviation = gram.amax();
-            let det = pose.rot.determinant();
-            if deviation > ROTATION_TOLERANCE || det <= 0.0 {
+            if let Some((deviation, det)) = rotation_defect(&pose.rot) {
                 return Err(TrajError::NotRotation {
                     path: path.to_path_buf(),
                     line,

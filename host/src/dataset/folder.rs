@@ -189,11 +189,29 @@ pub(crate) fn open(root: &Path, camera: Option<StereoCalib>) -> Result<Sequence,
 }
 
 /// KITTI poses, one per frame: the poses before a bad line or past the end, and the problem.
-fn kitti_poses(
+/// A line whose 3x3 part is not a rotation ([`crate::traj::rotation_defect`], the rule
+/// `semloc eval` applies to the same files) is a bad line: its rotation error would be
+/// meaningless.
+pub(super) fn kitti_poses(
     path: &Path,
     frames: usize,
 ) -> Result<(Vec<Se3>, Option<DatasetError>), DatasetError> {
     let (mut rows, mut problem) = read_rows_prefix(path, 12)?;
+    let defect = rows.iter().enumerate().find_map(|(k, r)| {
+        let pose = Se3::from_matrix3x4(&Matrix3x4::from_row_slice(r));
+        crate::traj::rotation_defect(&pose.rot).map(|d| (k, d))
+    });
+    if let Some((k, (deviation, det))) = defect {
+        rows.truncate(k);
+        problem = Some(DatasetError::Parse {
+            path: path.to_path_buf(),
+            line: data_line(path, k),
+            msg: format!(
+                "the 3x3 part is not a rotation matrix (|RᵀR − I| = {deviation:.2e}, det \
+                 {det:.4}); poses must be rigid camera-to-world transforms"
+            ),
+        });
+    }
     if problem.is_none() && rows.len() != frames {
         problem = Some(DatasetError::PoseCountMismatch {
             path: path.to_path_buf(),
@@ -461,6 +479,12 @@ mod tests {
         let s = Sequence::open(root, None).unwrap();
         assert_eq!(s.gt.as_ref().map(Vec::len), Some(1));
         assert!(matches!(s.gt_problem, Some(DatasetError::BadFieldCount { line: 2, .. })));
+        // So is a line that is not a rotation (here a reflection).
+        fs::write(root.join("gt.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 -1 0 0 0 0 1 0\n")
+            .unwrap();
+        let s = Sequence::open(root, None).unwrap();
+        assert_eq!(s.gt.as_ref().map(Vec::len), Some(1));
+        assert!(matches!(s.gt_problem, Some(DatasetError::Parse { line: 2, .. })));
         // A different image size on the right.
         GrayImage::from_pixel(9, 4, Luma([0])).save(root.join("right/1.png")).unwrap();
         assert!(matches!(

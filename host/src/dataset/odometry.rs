@@ -5,11 +5,11 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Matrix3x4, Vector3};
+use nalgebra::Vector3;
 use semloc_core::geom::Se3;
 
 use super::calib::{stereo_from_projections, CalibFile};
-use super::text::{read_rows, read_rows_prefix};
+use super::text::read_rows;
 use super::{check_times, first_pair_size, list_pair, CameraPair, DatasetError, Layout, Sequence};
 
 /// Finds the sequence folder and the pose file for `seq` under `root`.
@@ -77,32 +77,17 @@ pub(crate) fn open(
 
     let mut gt_problem = None;
     let gt = if poses_path.is_file() {
-        let (mut rows, bad) = read_rows_prefix(&poses_path, 12)?;
+        let (poses, bad) = super::folder::kitti_poses(&poses_path, left.len())?;
         gt_problem = bad;
-        if gt_problem.is_none() && rows.len() != left.len() {
-            gt_problem = Some(DatasetError::PoseCountMismatch {
-                path: poses_path.clone(),
-                poses: rows.len(),
-                images: left.len(),
-            });
-        }
-        if rows.len() > left.len() {
-            // More poses than frames: most likely another sequence's file; no frame's pose can
-            // be trusted, so there is no ground truth (the run warns).
-            rows.clear();
-        }
         // Poses are of camera 0; the colour pair's left camera sits P2[0][3]/fx to its side
         // in the rectified frame (pykitti's T2), so G₂ = T₂ G₀ T₂⁻¹ keeps pose 0 the identity.
         let t2 = Se3::new(nalgebra::Matrix3::identity(), Vector3::new(pl[3] / pl[0], 0.0, 0.0));
         let t2_inv = t2.inverse();
-        let poses = rows
-            .iter()
-            .map(|r| {
-                let g = Se3::from_matrix3x4(&Matrix3x4::from_row_slice(r));
-                match pair {
-                    CameraPair::Grey => g,
-                    CameraPair::Colour => t2.compose(&g).compose(&t2_inv),
-                }
+        let poses = poses
+            .into_iter()
+            .map(|g| match pair {
+                CameraPair::Grey => g,
+                CameraPair::Colour => t2.compose(&g).compose(&t2_inv),
             })
             .collect::<Vec<_>>();
         (!poses.is_empty()).then_some(poses)

@@ -228,6 +228,35 @@ fn poses_line_with_13_numbers() {
     assert_eq!(seq.summary().gt_frames, 1);
 }
 
+/// A ground-truth line whose 3x3 part is not a rotation ends the ground truth there, as in
+/// `semloc eval`: its rotation errors (RPE, r_rel) would be meaningless.
+#[test]
+fn poses_line_that_is_not_a_rotation() {
+    let (tmp, _) = odometry_fixture(3);
+    let poses = tmp.path().join("poses/00.txt");
+    for (bad, what) in [
+        ("-1 0 0 1 0 1 0 0 0 0 1 0\n", "a reflection"),
+        ("1 0 0 1 0 1.1 0 0 0 0 1 0\n", "a stretch"),
+        ("0 0 0 1 0 0 0 0 0 0 0 0\n", "all zero"),
+    ] {
+        write(&poses, &format!("# comment\n{}{bad}{}", pose_line(0.0), pose_line(2.0)));
+        let seq = open_odo(&tmp).unwrap();
+        assert_eq!(seq.gt.as_ref().map(Vec::len), Some(1), "{what}");
+        let e = seq.gt_problem.clone().expect("problem recorded");
+        assert!(matches!(&e, DatasetError::Parse { line: 3, .. }), "{what}: {e}");
+        names(&e, "00.txt:3");
+        assert!(e.to_string().contains("not a rotation matrix"), "{e}");
+    }
+    // Rotations as KITTI stores them (9 digits) pass.
+    let c = 0.6_f64.cos();
+    let s = 0.6_f64.sin();
+    let turned = format!("{c:.9e} 0 {s:.9e} 2 0 1 0 0 {:.9e} 0 {c:.9e} 0\n", -s);
+    write(&poses, &format!("{}{}{turned}", pose_line(0.0), pose_line(1.0)));
+    let seq = open_odo(&tmp).unwrap();
+    assert_eq!(seq.gt.as_ref().map(Vec::len), Some(3));
+    assert!(seq.gt_problem.is_none());
+}
+
 #[test]
 fn poses_count_differs_from_images() {
     let (tmp, _) = odometry_fixture(3);
