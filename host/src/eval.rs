@@ -67,6 +67,13 @@ pub enum EvalError {
     /// (the same condition on which evo refuses to align).
     #[error("degenerate point set: Umeyama alignment needs positions spanning at least a plane")]
     DegenerateAlignment,
+    /// The positions are so large that their spread overflows `f64` (a diverged estimate), so
+    /// no alignment can be computed.
+    #[error(
+        "positions too large to align: their spread overflows f64 (|x| near 1e150 m or more; a \
+         diverged estimate?)"
+    )]
+    Overflow,
     /// An RPE delta of 0 frames, or a negative or non-finite distance.
     #[error("RPE delta must be at least 1 frame or a finite, non-negative distance")]
     InvalidDelta,
@@ -174,6 +181,9 @@ pub fn umeyama(
     }
     cov /= n;
     var_s /= n;
+    if !(var_s.is_finite() && cov.iter().all(|x| x.is_finite())) {
+        return Err(EvalError::Overflow);
+    }
     let svd = cov.svd(true, true);
     let (u, v_t) = match (svd.u, svd.v_t) {
         (Some(u), Some(v_t)) => (u, v_t),
@@ -933,6 +943,11 @@ mod tests {
         assert_eq!(umeyama(&p, &p, false), Err(EvalError::DegenerateAlignment));
         let line: Vec<Vector3<f64>> = (0..5).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
         assert_eq!(umeyama(&line, &line, true), Err(EvalError::DegenerateAlignment));
+        // Finite positions whose spread overflows are not called degenerate.
+        let mut far = p.clone();
+        far[1].x = 1e300;
+        assert_eq!(umeyama(&far, &p, false), Err(EvalError::Overflow));
+        assert_eq!(umeyama(&far, &far, true), Err(EvalError::Overflow));
         assert_eq!(umeyama(&[], &[], true), Err(EvalError::Empty));
         let gt = drive(10);
         assert_eq!(
