@@ -645,6 +645,19 @@ fn first_pair_size(left: &[PathBuf], right: &[PathBuf]) -> Result<(u32, u32), Da
     Ok(size)
 }
 
+/// The note for a timestamps file longer than the image list (its extra entries are left
+/// out): a clip cut from a longer drive, or images missing at the end.
+fn extra_times_note(path: &Path, times: usize, images: usize) -> Option<String> {
+    (times > images).then(|| {
+        format!(
+            "{}: {times} timestamps for {images} images; the first {images} are used (a clip of a \
+             longer drive, or are the last {} frames' images missing?)",
+            path.display(),
+            times - images
+        )
+    })
+}
+
 /// Times of the first `images` frames from a list; shorter lists, and times that do not
 /// increase strictly (a duplicate or a step back would reach the TUM output and break every
 /// time association downstream), are errors.

@@ -288,6 +288,32 @@ fn times_shorter_than_images() {
     names(&e, "times.txt");
 }
 
+/// Extra timestamps are used for the frames present, and a note says how many were left out.
+#[test]
+fn times_longer_than_images_are_noted() {
+    let (tmp, seq) = odometry_fixture(3);
+    assert!(open_odo(&tmp).unwrap().notes.is_empty());
+    write(&seq.join("times.txt"), "0\n0.1\n0.2\n0.3\n0.4\n");
+    let s = open_odo(&tmp).unwrap();
+    assert_eq!(s.times_s, [0.0, 0.1, 0.2]);
+    assert_eq!(s.notes.len(), 1, "{:?}", s.notes);
+    assert!(s.notes[0].contains("times.txt: 5 timestamps for 3 images"), "{:?}", s.notes);
+    assert!(s.notes[0].contains("last 2 frames"), "{:?}", s.notes);
+    // The same for a raw drive's image timestamps.
+    let (tmp, drive) = raw_fixture(2);
+    assert!(Sequence::open_raw(tmp.path(), "2011_09_26_0001", None).unwrap().notes.is_empty());
+    let stamps = drive.join("image_02/timestamps.txt");
+    let more = fs::read_to_string(&stamps).unwrap() + "2011-09-26 13:00:00.900000000\n";
+    write(&stamps, &more);
+    let s = Sequence::open_raw(tmp.path(), "2011_09_26_0001", None).unwrap();
+    assert_eq!(s.times_s.len(), 2);
+    assert!(
+        s.notes.len() == 1 && s.notes[0].contains("3 timestamps for 2 images"),
+        "{:?}",
+        s.notes
+    );
+}
+
 #[test]
 fn left_right_image_count_mismatch() {
     let (tmp, seq) = odometry_fixture(3);
