@@ -87,11 +87,7 @@ pub enum TrajError {
         found: usize,
     },
     /// A KITTI line's 3x3 block is not a rotation (not orthonormal, or a reflection).
-    #[error(
-        "{}:{line}: the 3x3 part is not a rotation matrix (|RᵀR − I| = {deviation:.2e}, det \
-         {det:.4}); poses must be rigid camera-to-world transforms",
-        path.display()
-    )]
+    #[error("{}:{line}: {}", path.display(), not_rotation_msg(*deviation, *det))]
     NotRotation {
         /// The file.
         path: PathBuf,
@@ -292,6 +288,14 @@ pub fn rotation_defect(rot: &Matrix3<f64>) -> Option<(f64, f64)> {
     // Written so that NaN is a defect.
     let ok = deviation <= ROTATION_TOLERANCE && det > 0.0;
     (!ok).then_some((deviation, det))
+}
+
+/// What is wrong with a pose line that [`rotation_defect`] refuses.
+pub fn not_rotation_msg(deviation: f64, det: f64) -> String {
+    format!(
+        "the 3x3 part is not a rotation matrix (|RᵀR − I| = {deviation:.2e}, det {det:.4}); poses \
+         must be rigid camera-to-world transforms"
+    )
 }
 
 /// Parses KITTI pose text; `path` is only used in error messages. `#` starts a comment. A

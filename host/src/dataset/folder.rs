@@ -206,10 +206,7 @@ pub(super) fn kitti_poses(
         problem = Some(DatasetError::Parse {
             path: path.to_path_buf(),
             line: data_line(path, k),
-            msg: format!(
-                "the 3x3 part is not a rotation matrix (|RᵀR − I| = {deviation:.2e}, det \
-                 {det:.4}); poses must be rigid camera-to-world transforms"
-            ),
+            msg: crate::traj::not_rotation_msg(deviation, det),
         });
     }
     if problem.is_none() && rows.len() != frames {
