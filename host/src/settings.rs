@@ -293,8 +293,9 @@ impl Settings {
                     _ if given.is_finite() && given > 0.0 => bad(
                         baseline_key,
                         format!(
-                            "{given}{unit} gives a baseline of {} m (bf / fx), which must be \
-                             finite and > 0",
+                            "{given:e}{unit} over fx {:e} gives a baseline of {} m, which must \
+                             be finite and > 0",
+                            c.fx,
                             c.calib().baseline_m
                         ),
                     ),
