@@ -157,7 +157,8 @@ impl Sim3 {
 /// (scale fixed to 1 unless `with_scale`). Uses a 3x3 SVD with the reflection fix, in `f64`.
 ///
 /// Fails with [`EvalError::DegenerateAlignment`] when the cross-covariance has rank < 2
-/// (fewer than three non-collinear points), and [`EvalError::LengthMismatch`] / [`EvalError::Empty`].
+/// (fewer than three non-collinear points), [`EvalError::Overflow`] when the positions' spread
+/// overflows `f64`, and [`EvalError::LengthMismatch`] / [`EvalError::Empty`].
 pub fn umeyama(
     src: &[Vector3<f64>],
     dst: &[Vector3<f64>],
