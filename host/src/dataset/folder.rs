@@ -129,7 +129,8 @@ pub(crate) fn open(root: &Path, camera: Option<StereoCalib>) -> Result<Sequence,
                 images: left.len(),
             });
         }
-        check_times(&times_path, times, left.len())?
+        // the counts are equal: no note for extra times
+        check_times(&times_path, times, left.len())?.0
     } else {
         notes.push(format!(
             "no {}: frame i is taken to be at i × {FOLDER_DEFAULT_PERIOD_S} s",
@@ -196,31 +197,32 @@ pub(super) fn kitti_poses(
     path: &Path,
     frames: usize,
 ) -> Result<(Vec<Se3>, Option<DatasetError>), DatasetError> {
-    let (mut rows, mut problem) = read_rows_prefix(path, 12)?;
-    let defect = rows.iter().enumerate().find_map(|(k, r)| {
+    let (rows, mut problem) = read_rows_prefix(path, 12)?;
+    // Each row becomes a pose once; the first whose 3x3 part is not a rotation ends them.
+    let mut poses = Vec::with_capacity(rows.len());
+    for (k, r) in rows.iter().enumerate() {
         let pose = Se3::from_matrix3x4(&Matrix3x4::from_row_slice(r));
-        crate::traj::rotation_defect(&pose.rot).map(|d| (k, d))
-    });
-    if let Some((k, (deviation, det))) = defect {
-        rows.truncate(k);
-        problem = Some(DatasetError::Parse {
-            path: path.to_path_buf(),
-            line: data_line(path, k),
-            msg: crate::traj::not_rotation_msg(deviation, det),
-        });
+        if let Some((deviation, det)) = crate::traj::rotation_defect(&pose.rot) {
+            problem = Some(DatasetError::Parse {
+                path: path.to_path_buf(),
+                line: data_line(path, k),
+                msg: crate::traj::not_rotation_msg(deviation, det),
+            });
+            break;
+        }
+        poses.push(pose);
     }
-    if problem.is_none() && rows.len() != frames {
+    if problem.is_none() && poses.len() != frames {
         problem = Some(DatasetError::PoseCountMismatch {
             path: path.to_path_buf(),
-            poses: rows.len(),
+            poses: poses.len(),
             images: frames,
         });
     }
-    if rows.len() > frames {
+    if poses.len() > frames {
         // More poses than frames: not this sequence's file; no pose can be trusted.
-        rows.clear();
+        poses.clear();
     }
-    let poses = rows.iter().map(|r| Se3::from_matrix3x4(&Matrix3x4::from_row_slice(r))).collect();
     Ok((poses, problem))
 }
 
