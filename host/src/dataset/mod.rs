@@ -658,10 +658,15 @@ fn extra_times_note(path: &Path, times: usize, images: usize) -> Option<String> 
     })
 }
 
-/// Times of the first `images` frames from a list; shorter lists, and times that do not
-/// increase strictly (a duplicate or a step back would reach the TUM output and break every
-/// time association downstream), are errors.
-fn check_times(path: &Path, mut times: Vec<f64>, images: usize) -> Result<Vec<f64>, DatasetError> {
+/// Times of the first `images` frames from a list, and the note for a longer list
+/// ([`extra_times_note`]); shorter lists, and times that do not increase strictly (a duplicate
+/// or a step back would reach the TUM output and break every time association downstream),
+/// are errors.
+fn check_times(
+    path: &Path,
+    mut times: Vec<f64>,
+    images: usize,
+) -> Result<(Vec<f64>, Option<String>), DatasetError> {
     if times.len() < images {
         return Err(DatasetError::TimesTooShort {
             path: path.to_path_buf(),
@@ -670,6 +675,7 @@ fn check_times(path: &Path, mut times: Vec<f64>, images: usize) -> Result<Vec<f6
         });
     }
     // Extra entries (e.g. a timestamps file of a longer drive) belong to frames not present.
+    let note = extra_times_note(path, times.len(), images);
     times.truncate(images);
     if let Some(k) = times.windows(2).position(|w| w[1] <= w[0]) {
         return Err(DatasetError::TimesNotIncreasing {
@@ -679,7 +685,7 @@ fn check_times(path: &Path, mut times: Vec<f64>, images: usize) -> Result<Vec<f6
             previous_s: times[k],
         });
     }
-    Ok(times)
+    Ok((times, note))
 }
 
 /// The frame number a file name stands for (`000042.png` → 42), if its stem is all digits.

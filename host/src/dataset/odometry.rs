@@ -10,10 +10,7 @@ use semloc_core::geom::Se3;
 
 use super::calib::{stereo_from_projections, CalibFile};
 use super::text::read_rows;
-use super::{
-    check_times, extra_times_note, first_pair_size, list_pair, CameraPair, DatasetError, Layout,
-    Sequence,
-};
+use super::{check_times, first_pair_size, list_pair, CameraPair, DatasetError, Layout, Sequence};
 
 /// Finds the sequence folder and the pose file for `seq` under `root`.
 fn locate(root: &Path, seq: &str) -> Result<(PathBuf, String, PathBuf), DatasetError> {
@@ -76,9 +73,8 @@ pub(crate) fn open(
 
     let times_path = dir.join("times.txt");
     let times: Vec<f64> = read_rows(&times_path, 1)?.into_iter().map(|r| r[0]).collect();
-    let notes: Vec<String> =
-        extra_times_note(&times_path, times.len(), left.len()).into_iter().collect();
-    let times_s = check_times(&times_path, times, left.len())?;
+    let (times_s, extra) = check_times(&times_path, times, left.len())?;
+    let notes: Vec<String> = extra.into_iter().collect();
 
     let mut gt_problem = None;
     let gt = if poses_path.is_file() {

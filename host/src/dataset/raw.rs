@@ -22,8 +22,7 @@ use semloc_core::geom::Se3;
 use super::calib::{homogeneous, stereo_from_projections, CalibFile};
 use super::text::{list_files, numbered_lines, read_text};
 use super::{
-    check_times, extra_times_note, first_pair_size, list_pair, oxts, CameraPair, DatasetError,
-    Layout, Sequence,
+    check_times, first_pair_size, list_pair, oxts, CameraPair, DatasetError, Layout, Sequence,
 };
 
 /// Whether `name` looks like a KITTI date folder, `YYYY_MM_DD`.
@@ -199,9 +198,8 @@ pub(crate) fn open(
 
     let times_path = cam_dir(l).join("timestamps.txt");
     let (time_origin_s, times) = read_timestamps_with_origin(&times_path)?;
-    let notes: Vec<String> =
-        extra_times_note(&times_path, times.len(), left.len()).into_iter().collect();
-    let times_s = check_times(&times_path, times, left.len())?;
+    let (times_s, extra) = check_times(&times_path, times, left.len())?;
+    let notes: Vec<String> = extra.into_iter().collect();
 
     let oxts_dir = drive_dir.join("oxts").join("data");
     let mut gt_problem = None;
