@@ -87,6 +87,22 @@ fn documented_ranges_are_the_checked_ranges() {
         t.orb.structure_gain = g;
         assert_eq!(t.check(Path::new(P)).is_ok(), ok, "structure_gain {g}");
     }
+    // The tracker's ratios and priors: "(0..1]" as `TrackerParams::check` has it.
+    type Field = fn(&mut Settings) -> &mut f32;
+    let ratios: [(&str, Field); 4] = [
+        ("tracker.nn_ratio", |s| &mut s.tracker.nn_ratio),
+        ("tracker.keyframe_ratio", |s| &mut s.tracker.keyframe_ratio),
+        ("tracker.motion.prior_vehicle", |s| &mut s.tracker.motion.prior_vehicle),
+        ("tracker.motion.prior_human", |s| &mut s.tracker.motion.prior_human),
+    ];
+    for (key, field) in ratios {
+        assert!(doc(key).contains("(0..1]"), "{key}: {:?}", doc(key));
+        for (v, ok) in [(1.0, true), (1e-6, true), (0.0, false), (1.0 + 1e-6, false)] {
+            let mut t = s.clone();
+            *field(&mut t) = v;
+            assert_eq!(t.check(Path::new(P)).is_ok(), ok, "{key} {v}");
+        }
+    }
     for (w, l, ok) in [
         (1, 2, true),
         (MAX_SAD_HALF_WINDOW, MAX_SAD_SEARCH, true),
