@@ -18,7 +18,7 @@
 //! check their operands the same way and hand them to `nn::dispatch`, which runs the x86
 //! kernel (`nn::x86::{conv1, depthwise, pointwise}`) where one applies, else the portable one
 //! (`nn::portable::{conv, depthwise, pointwise}`); all compute the same integers. Stack: the
-//! references none; the fast kernels as documented in their files (at most 21 KiB).
+//! references none; the fast kernels as documented in their files (at most 19 KiB).
 //!
 //! **1×1 weights are packed** ([`pack_pointwise`], `[⌈O/8⌉][⌈I/4⌉][8][4]`), the layout the
 //! model blob stores; the reference reads them through [`pointwise_packed_index`].

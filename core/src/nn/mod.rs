@@ -56,10 +56,11 @@
 //! only scratch is on the stack and fixed; the references use none. Portable kernels: a
 //! 64-entry `i32` accumulator block (pool: 256 B; depthwise: plus lane-form requantisers,
 //! 6.3 KiB) and an unpacked weight panel with a staged `i16` row (pointwise: 10 KiB). The x86
-//! kernels (hosts only): 8 KiB staged input tile (VNNI GEMM), 12 + 7 KiB (AVX2 GEMM), 21 KiB of
-//! per-group constants (depthwise), 16 KiB of staged row chunks and 24 KiB of column taps
-//! (resize), 3 KiB (first conv). Shapes, slice lengths and zero points are checked once at entry
-//! and reported as [`NnError`]; the kernels do not panic on bad shapes or parameters.
+//! kernels (hosts only): 8 KiB staged input tile (VNNI GEMM), 12 + 7 KiB (AVX2 GEMM), 14 KiB of
+//! per-group constants and a 256-byte row of zero points (depthwise), 16 KiB of staged row
+//! chunks and 24 KiB of column taps (resize), 3 KiB (first conv). Shapes, slice lengths and
+//! zero points are checked once at entry and reported as [`NnError`]; the kernels do not panic
+//! on bad shapes or parameters.
 //!
 //! **Speed** — `cargo bench -p semloc-core --bench nn` (the 192×640 Res2Net frame, 373 MMAC,
 //! op by op and, with `SEMLOC_SLM`, the real graph through [`graph::run`]); one core of an AMD

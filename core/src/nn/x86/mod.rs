@@ -6,7 +6,7 @@
 //! | file        | ONNX op                                           | ISA                | stack   |
 //! |-------------|---------------------------------------------------|--------------------|---------|
 //! | `pointwise` | `Conv` 1×1 (int8 GEMM over packed weights)        | AVX2; AVX-512 VNNI | 19/8 KiB|
-//! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2           | AVX2               | 21 KiB  |
+//! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2           | AVX2               | 14 KiB  |
 //! | `conv1`     | `Conv` 3×3 of a one-channel map (the first layer) | AVX2               | 3 KiB   |
 //! | `resize`    | `Resize` bilinear, `half_pixel`                   | AVX2               | 40 KiB  |
 //! | `eltwise`   | `Add`; the rescales of `Concat`                   | AVX2               | < 1 KiB |
