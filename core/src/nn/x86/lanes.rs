@@ -23,7 +23,10 @@ use crate::nn::Requant;
 #[derive(Clone, Copy)]
 pub(super) struct Rq8 {
     mult: __m256i,
-    /// The odd lanes' multipliers moved to the low half of each 64-bit lane (for `vpmuldq`).
+    /// The odd lanes' multipliers copied to the low half of each 64-bit lane (for `vpmuldq`).
+    /// A shuffle, not a 64-bit shift: from `srli_epi64` LLVM proved the high halves zero,
+    /// rewrote the `vpmuldq` as a 64-bit multiply and emulated it with three `vpmuludq` (found
+    /// in the requantisers built with [`Rq8::splat`]: resize, add, concat).
     mult_odd: __m256i,
     left: __m256i,
     right: __m256i,
@@ -66,7 +69,7 @@ impl Rq8 {
         let mult = v(m);
         Self {
             mult,
-            mult_odd: _mm256_srli_epi64::<32>(mult),
+            mult_odd: _mm256_shuffle_epi32::<0xf5>(mult),
             left: v(l),
             right: v(e),
             mask: v(mask),
@@ -83,7 +86,9 @@ pub(super) fn requant8(x: __m256i, p: &Rq8) -> __m256i {
     let nudge = _mm256_set1_epi64x(1 << 30);
     let x = if p.left_any { _mm256_sllv_epi32(x, p.left) } else { x };
     let pe = _mm256_add_epi64(_mm256_mul_epi32(x, p.mult), nudge);
-    let po = _mm256_add_epi64(_mm256_mul_epi32(_mm256_srli_epi64::<32>(x), p.mult_odd), nudge);
+    // `vpmuldq` reads the low half of each 64-bit lane: the odd lanes, copied down
+    let odd = _mm256_shuffle_epi32::<0xf5>(x);
+    let po = _mm256_add_epi64(_mm256_mul_epi32(odd, p.mult_odd), nudge);
     // bits 31..62 of each product: the even ones to the low, the odd ones to the high half
     let s =
         _mm256_blend_epi32::<0b1010_1010>(_mm256_srli_epi64::<31>(pe), _mm256_slli_epi64::<1>(po));
