@@ -79,6 +79,26 @@ impl Rq8 {
     }
 }
 
+impl Rq8 {
+    /// The same requantisers with the 64-bit lanes 1 and 2 swapped: for values in `vphaddd`
+    /// order (`[c0 c1 c4 c5 | c2 c3 c6 c7]`). `mult_odd` stays paired with `mult`, the swap
+    /// moving whole 64-bit lanes.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn in_hadd_order(&self) -> Self {
+        let p = |v: __m256i| _mm256_permute4x64_epi64::<0xd8>(v);
+        Self {
+            mult: p(self.mult),
+            mult_odd: p(self.mult_odd),
+            left: p(self.left),
+            right: p(self.right),
+            mask: p(self.mask),
+            half: p(self.half),
+            left_any: self.left_any,
+        }
+    }
+}
+
 /// [`Requant::apply`] on 8 lanes, for `|x| · 2^left ≤ 2^30` (see the module docs).
 #[inline]
 #[target_feature(enable = "avx2")]

@@ -14,7 +14,8 @@
 //! - AVX2: the 4 bytes are sign-extended to `i16` and multiplied with `vpmaddwd` against the
 //!   sign-extended weights (pairs of products per lane, the two halves of a channel's sum in
 //!   adjacent lanes, added by one `vphaddd` at the end); start `bias − zp·Σw`. Tiles of 6
-//!   pixels × 8 channels.
+//!   pixels × 8 channels. The sums stay in `vphaddd`'s lane order (the block's bias and
+//!   requantisers are permuted to it once), and pixels are packed and stored two at a time.
 //!
 //! **ISA:** AVX2 (detected at run time: [`super::Avx2`]); AVX-512 F/BW/VL + VNNI for the VNNI form
 //! (probed at run time, [`super::vnni_available`]). **Stack:** the AVX2 form a 12 KiB staged `i16`
@@ -214,7 +215,9 @@ unsafe fn pw_avx2(a: &Pw<'_>, out: &mut [i8]) {
     while b0 < blocks {
         let nbk = (blocks - b0).min(AVX2_BLOCKS);
         for j in 0..nbk {
-            (c0[j], rq[j], nb[j]) = block_consts(a, b0 + j, _mm256_setzero_si256(), 0);
+            // in the order the tiles' `vphaddd` leaves the channels in ([`store_pair`])
+            let (c, r, n) = block_consts(a, b0 + j, _mm256_setzero_si256(), 0);
+            (c0[j], rq[j], nb[j]) = (_mm256_permute4x64_epi64::<0xd8>(c), r.in_hadd_order(), n);
         }
         let mut p0 = 0;
         while p0 < a.p {
@@ -266,12 +269,53 @@ unsafe fn tile_avx2<const MR: usize>(
     let acc = [[_mm256_setzero_si256(); 2]; MR];
     // SAFETY: by the caller
     let acc = unsafe { kloop_avx2::<MR>(acc, stage.as_ptr(), kpad, w) };
-    #[allow(clippy::needless_range_loop)]
-    for i in 0..MR {
-        let s = _mm256_permute4x64_epi64::<0xd8>(_mm256_hadd_epi32(acc[i][0], acc[i][1]));
-        let v = finish8(_mm256_add_epi32(s, c0), rq, zo, lo);
+    // the channel sums in `vphaddd` order, as `c0` and `rq` are
+    let value = |i: usize| {
+        finish8(_mm256_add_epi32(_mm256_hadd_epi32(acc[i][0], acc[i][1]), c0), rq, zo, lo)
+    };
+    let mut i = 0;
+    while i + 2 <= MR {
         // SAFETY: by the caller
-        unsafe { store8(o.add(i * n), v, nb) };
+        unsafe { store_pair(o.add(i * n), o.add((i + 1) * n), value(i), value(i + 1), nb) };
+        i += 2;
+    }
+    if i < MR {
+        let v = value(i);
+        // SAFETY: by the caller (the pair's second pixel is this one again)
+        unsafe { store_pair(o.add(i * n), o.add(i * n), v, v, nb) };
+    }
+}
+
+/// Two pixels' 8 channels in `vphaddd` order (`[c0 c1 c4 c5 | c2 c3 c6 c7]`, `i32`), saturated
+/// to `i8` and stored in channel order: the first `nb` (≤ 8) bytes at `d0` and at `d1`. One
+/// pack of both pixels and one 16-bit interleave of its halves put the bytes in order, where
+/// a pixel alone in channel order took a lane permute and a pack of its own.
+///
+/// # Safety
+/// `nb` writable bytes at `d0` and at `d1`.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn store_pair(d0: *mut i8, d1: *mut i8, a: __m256i, b: __m256i, nb: usize) {
+    // per 128-bit lane: a0 a1 a4 a5 b0 b1 b4 b5 | a2 a3 a6 a7 b2 b3 b6 b7
+    let w = _mm256_packs_epi32(a, b);
+    let y = _mm256_packs_epi16(w, w);
+    // 16-bit pairs of the two halves interleaved: a0 .. a7 b0 .. b7
+    let r = _mm_unpacklo_epi16(_mm256_castsi256_si128(y), _mm256_extracti128_si256::<1>(y));
+    let (lo, hi) = (_mm_cvtsi128_si64(r) as u64, _mm_extract_epi64::<1>(r) as u64);
+    if nb >= 8 {
+        // SAFETY: by the caller
+        unsafe {
+            (d0 as *mut u64).write_unaligned(lo);
+            (d1 as *mut u64).write_unaligned(hi);
+        }
+    } else {
+        for (t, (&u, &v)) in lo.to_le_bytes().iter().zip(&hi.to_le_bytes()).enumerate().take(nb) {
+            // SAFETY: t < nb
+            unsafe {
+                *d0.add(t) = u as i8;
+                *d1.add(t) = v as i8;
+            }
+        }
     }
 }
 
