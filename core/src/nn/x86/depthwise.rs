@@ -106,8 +106,9 @@ const DW_GROUPS: usize = 32;
 const ZP_ROW: usize = DW_GROUPS * 8;
 
 /// Depthwise 3×3, pad 1, AVX2: per output pixel and 8-channel group, the raw inputs of all 9
-/// taps on top of `bias − zp·Σw`, a border pixel's outside taps reading the zero point ([`dw_span`]).
-/// Groups of four full groups are packed and stored as 32 bytes. `out` is `oh × ow × c`.
+/// taps on top of `bias − zp·Σw`, a border pixel's outside taps reading the zero point
+/// ([`dw_span`]). Groups of four full groups are packed and stored as 32 bytes. `out` is
+/// `oh × ow × c`.
 fn run(a: &Dw<'_>, out: &mut [i8], _avx2: Avx2) {
     let oh = (a.h - 1) / a.stride + 1;
     let ow = (a.w - 1) / a.stride + 1;
@@ -276,6 +277,14 @@ struct Span {
     spill_end: usize,
 }
 
+impl Span {
+    /// Offset of tap `t = ky·3 + kx` from a pixel's first tap.
+    #[inline]
+    fn tap(&self, t: usize) -> usize {
+        t / 3 * self.row + t % 3 * self.c
+    }
+}
+
 /// The pixels of a [`Span`], each pixel's groups in turn (so a short last group's 8-byte
 /// store only spills onto a pixel written after it). `FULL`: all 9 taps inside and read 8
 /// bytes at a time unchecked; else the taps outside `mask` read as the zero point and a short
@@ -299,7 +308,6 @@ unsafe fn dw_span<const FULL: bool>(
     while full4 + 4 <= ng && g[full4 + 3].nb == 8 {
         full4 += 4;
     }
-    let off = |t: usize| t / 3 * sp.row + t % 3 * sp.c;
     for px in 0..sp.n {
         let p = sp.p0.wrapping_add(px * sp.step);
         // SAFETY: by the caller
@@ -310,7 +318,7 @@ unsafe fn dw_span<const FULL: bool>(
             for (t, tp) in tp.iter_mut().enumerate() {
                 if sp.mask & (1 << t) != 0 {
                     // SAFETY: a tap inside the input
-                    *tp = unsafe { sp.x.add(p.wrapping_add(off(t))) };
+                    *tp = unsafe { sp.x.add(p.wrapping_add(sp.tap(t))) };
                 }
             }
         }
@@ -356,54 +364,43 @@ struct PxCtx<'a> {
 unsafe fn group_acc<const FULL: bool>(cx: &PxCtx<'_>, j: usize, gr: &DwGroup) -> __m256i {
     let sp = cx.sp;
     let pj = cx.p.wrapping_add(j * 8);
-    let off = |t: usize| t / 3 * sp.row + t % 3 * sp.c;
     let v = if FULL {
         // SAFETY: by the caller (FULL)
-        taps9(|t| unsafe { _mm_loadl_epi64(sp.x.add(pj + off(t)) as *const __m128i) }, gr)
+        taps9(|t| unsafe { _mm_loadl_epi64(sp.x.add(pj + sp.tap(t)) as *const __m128i) }, gr)
     } else if gr.nb == 8 {
         // SAFETY: a tap inside the input and a full group's 8 bytes, or the zero row
         taps9(|t| unsafe { _mm_loadl_epi64(cx.tp[t].add(j * 8) as *const __m128i) }, gr)
     } else {
         // SAFETY: the taps in `mask` are inside the input
-        unsafe { dw_taps9_border(sp.x, sp.x_len, pj, sp.row, sp.c, gr, sp.mask, cx.zp8) }
+        unsafe { dw_taps9_border(sp, pj, gr, cx.zp8) }
     };
     finish8(v, &gr.rq, cx.zo, cx.lo)
 }
 
-/// `c_int + Σ x·w` ([`taps9`]) for a pixel with a short group: the taps outside the input (not in `mask`, bit `ky·3 + kx`)
-/// read as the zero point, so `c_int + Σ x·w` is exactly `bias + Σ_inside (x − zp)·w`. Taps
-/// whose 8 bytes would pass the input's end (a short last group) read the bytes there are; the
-/// lanes past the group's channels meet zero weights.
+/// [`taps9`] of a short group at offset `p0` (its pixel's first tap): the taps outside the input
+/// (not in the span's mask) read as the zero point, so the sum is exactly
+/// `bias + Σ_inside (x − zp)·w`. Taps whose 8 bytes would pass the input's end read the bytes
+/// there are; the lanes past the group's channels meet zero weights.
 ///
 /// # Safety
-/// `x` holds `x_len` bytes; tap `ky, kx` of `mask` starts inside them at
-/// `p0 + ky·row + kx·c` (the others are never formed into pointers).
+/// Each tap of the mask starts inside the input at `p0 + sp.tap(t)` (the others are never
+/// formed into pointers).
 #[inline]
 #[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn dw_taps9_border(
-    x: *const i8,
-    x_len: usize,
-    p0: usize,
-    row: usize,
-    c: usize,
-    g: &DwGroup,
-    mask: u16,
-    zp8: __m128i,
-) -> __m256i {
+unsafe fn dw_taps9_border(sp: &Span, p0: usize, g: &DwGroup, zp8: __m128i) -> __m256i {
     let tap = |t: usize| {
-        if mask & (1 << t) == 0 {
+        if sp.mask & (1 << t) == 0 {
             return zp8;
         }
-        let p = p0.wrapping_add(t / 3 * row + t % 3 * c);
-        if p + 8 <= x_len {
+        let p = p0.wrapping_add(sp.tap(t));
+        if p + 8 <= sp.x_len {
             // SAFETY: 8 bytes inside the input
-            unsafe { _mm_loadl_epi64(x.add(p) as *const __m128i) }
+            unsafe { _mm_loadl_epi64(sp.x.add(p) as *const __m128i) }
         } else {
             let mut b = [0u8; 8];
-            for (k, v) in b.iter_mut().enumerate().take(x_len - p) {
+            for (k, v) in b.iter_mut().enumerate().take(sp.x_len - p) {
                 // SAFETY: p + k < x_len
-                *v = unsafe { *x.add(p + k) } as u8;
+                *v = unsafe { *sp.x.add(p + k) } as u8;
             }
             _mm_set_epi64x(0, i64::from_le_bytes(b))
         }

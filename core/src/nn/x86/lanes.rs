@@ -77,9 +77,7 @@ impl Rq8 {
             left_any: l.iter().any(|&l| l != 0),
         }
     }
-}
 
-impl Rq8 {
     /// The same requantisers with the 64-bit lanes 1 and 2 swapped: for values in `vphaddd`
     /// order (`[c0 c1 c4 c5 | c2 c3 c6 c7]`). `mult_odd` stays paired with `mult`, the swap
     /// moving whole 64-bit lanes.
