@@ -651,7 +651,15 @@ mod tests {
         // first-layer maps up to 45 wide: runs of 8 stride-2 pixels take 16-byte loads
         let xs = Shape::new(c_in, rng.usize(1, 11), rng.usize(1, if first { 45 } else { 11 }));
         let kernel = if first { (3, 3) } else { (rng.usize(1, 4), rng.usize(1, 4)) };
-        let c_out = if first { rng.usize(1, 40) } else { rng.usize(1, 7) };
+        // every 7th other case more output channels than the portable kernel's channel-vector
+        // form takes (64)
+        let c_out = if first {
+            rng.usize(1, 40)
+        } else if i % 7 == 1 {
+            rng.usize(60, 70)
+        } else {
+            rng.usize(1, 7)
+        };
         let p = rand_conv(rng, c_out, kernel);
         // every 10th case: huge biases (the scalar requantisation path)
         let bmax = if i % 10 == 9 { 1 << 30 } else { 20_000 };

@@ -55,7 +55,9 @@
 //! **Memory.** No kernel allocates: inputs, weights and outputs are caller-provided slices. The
 //! only scratch is on the stack and fixed; the references use none. Portable kernels: a
 //! 64-entry `i32` accumulator block (pool: 256 B; depthwise: plus lane-form requantisers,
-//! 6.3 KiB) and an unpacked weight panel with a staged `i16` row (pointwise: 10 KiB). The x86
+//! 6.3 KiB), an unpacked weight panel with a staged `i16` row (pointwise: 10 KiB), transposed
+//! weights and lane-form requantisers (first conv: 5.8 KiB), 256-entry tables (add: 2 KiB;
+//! concat and relu with a rescale: 256 B). The x86
 //! kernels (hosts only): 8 KiB staged input tile (VNNI GEMM), 12 + 7 KiB (AVX2 GEMM), 14 KiB of
 //! per-group constants and a 256-byte row of zero points (depthwise), 16 KiB of staged row
 //! chunks and 24 KiB of column taps (resize), 3 KiB (first conv). Shapes, slice lengths and

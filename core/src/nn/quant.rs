@@ -203,14 +203,74 @@ impl Lanes8 {
     pub(crate) fn requant(&self, x: &[i32; 8], zp: i32, lo: i32, hi: i32) -> [i8; 8] {
         let mut out = [0i8; 8];
         for l in 0..8 {
-            let v = x[l] << self.left[l];
-            // SRDHM: floor((v·M + 2^30) / 2^31), whatever the sign (see `nn::x86::lanes`)
-            let s = ((v as i64 * self.m[l] + (1 << 30)) >> 31) as i32;
-            // RoundingDivideByPOT, as rounding_divide_by_pot
-            let q = (s >> self.right[l]) + i32::from((s & self.mask[l]) > self.half[l] - (s >> 31));
-            out[l] = (q + zp).clamp(lo, hi) as i8;
+            let (m, left, right, mask, half) =
+                (self.m[l], self.left[l], self.right[l], self.mask[l], self.half[l]);
+            out[l] = requant_lane(x[l], m, left, right, mask, half, zp, lo, hi);
         }
         out
+    }
+}
+
+/// The branch-free requantisation of one lane (the arithmetic of [`Lanes8`] and [`Lane1`]):
+/// `clamp(zp + apply(x), lo, hi)` for `|x| · 2^left ≤ 2^30`, with `mask = 2^right − 1` and
+/// `half = mask >> 1`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn requant_lane(
+    x: i32,
+    m: i64,
+    left: u32,
+    right: u32,
+    mask: i32,
+    half: i32,
+    zp: i32,
+    lo: i32,
+    hi: i32,
+) -> i8 {
+    let v = x << left;
+    // SRDHM: floor((v·M + 2^30) / 2^31), whatever the sign (see `nn::x86::lanes`)
+    let s = ((v as i64 * m + (1 << 30)) >> 31) as i32;
+    // RoundingDivideByPOT, as rounding_divide_by_pot
+    let q = (s >> right) + i32::from((s & mask) > half - (s >> 31));
+    (q + zp).clamp(lo, hi) as i8
+}
+
+/// One requantiser in the branch-free form of [`Lanes8`] (the same integers as
+/// [`Requant::to_i8`] for `|x| · 2^left ≤ 2^30`, see [`Lane1::fits`]), for the portable kernels
+/// that requantise whole slices with one requantiser (`Add`, `Resize`): there the loop over
+/// the slice auto-vectorises, where `to_i8`'s saturating steps and `i64` division do not.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lane1 {
+    m: i64,
+    left: u32,
+    right: u32,
+    mask: i32,
+    half: i32,
+}
+
+impl Lane1 {
+    /// The lane form of `r`.
+    pub(crate) fn new(r: Requant) -> Self {
+        let right = (-r.shift).clamp(0, 31) as u32;
+        let mask = ((1i64 << right) - 1) as i32;
+        Lane1 {
+            m: r.multiplier as i64,
+            left: r.shift.clamp(0, 30) as u32,
+            right,
+            mask,
+            half: mask >> 1,
+        }
+    }
+
+    /// True when every `|x| ≤ bound` may take [`Lane1::to_i8`] (see [`fits_simd_requant`]).
+    pub(crate) fn fits(r: Requant, bound: i64) -> bool {
+        fits_simd_requant(bound, &[], &[r])
+    }
+
+    /// `clamp(zp + apply(x), lo, hi)`, valid where [`Lane1::fits`] holds for `|x|`.
+    #[inline(always)]
+    pub(crate) fn to_i8(self, x: i32, zp: i32, lo: i32, hi: i32) -> i8 {
+        requant_lane(x, self.m, self.left, self.right, self.mask, self.half, zp, lo, hi)
     }
 }
 
@@ -342,6 +402,18 @@ mod tests {
             let (lo, hi) = clamp_range(zp, relu);
             let want: [i8; 8] = core::array::from_fn(|l| rq[l].to_i8(x[l], zp, lo, hi));
             assert_eq!(Lanes8::new(&rq).requant(&x, zp, lo, hi), want, "{rq:?} {x:?}");
+            for l in 0..8 {
+                // the bound each lane was drawn under is what `Lane1::fits` accepts
+                let bound = SIMD_REQUANT_BOUND >> rq[l].shift.clamp(0, 30);
+                assert!(Lane1::fits(rq[l], bound) && !Lane1::fits(rq[l], bound + 1));
+                assert_eq!(
+                    Lane1::new(rq[l]).to_i8(x[l], zp, lo, hi),
+                    want[l],
+                    "{:?} {}",
+                    rq[l],
+                    x[l]
+                );
+            }
         }
     }
 

@@ -8,11 +8,11 @@
 //!
 //! | file            | ONNX op                                      | stack            |
 //! |-----------------|----------------------------------------------|------------------|
-//! | [`conv`]        | `Conv`, `group = 1`, any kernel/stride/pads  | none             |
+//! | [`conv`]        | `Conv`, `group = 1`, any kernel/stride/pads  | 5.8 KiB          |
 //! | [`depthwise`]   | `Conv` depthwise 3×3, pad 1, stride 1/2      | 6.3 KiB          |
 //! | [`pointwise`]   | `Conv` 1×1 (int8 GEMM over packed weights)   | 10 KiB           |
 //! | [`resize`]      | `Resize` bilinear, `half_pixel`              | none             |
-//! | [`eltwise`]     | `Add`, `Concat` (channels), `Relu`           | none             |
+//! | [`eltwise`]     | `Add`, `Concat` (channels), `Relu`           | 2 KiB (`Add`)    |
 //! | [`pool`]        | `AveragePool` (the PPM's)                    | 256 B            |
 //!
 //! **ISA:** none required. Each kernel takes the operands its op has checked
