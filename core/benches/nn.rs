@@ -14,7 +14,8 @@
 //! reference, bit-equality checked) on a synthetic input of the model's size.
 //! `SEMLOC_NN_REPS=n` sets the repetitions of the table (default 5), `SEMLOC_NN_KINDS=pw,dw`
 //! limits it to some kinds, and `SEMLOC_NN_ISA=portable|avx2` caps the x86 fast kernels at the
-//! portable (safe, auto-vectorised) or the AVX2 ones (to compare them on a VNNI machine); `SEMLOC_NN_NOREF=1` skips timing the reference
+//! portable (safe, auto-vectorised) or the AVX2 ones (to compare them on a VNNI machine;
+//! `portable` also turns the aarch64 NEON kernels off); `SEMLOC_NN_NOREF=1` skips timing the reference
 //! kernels (for `perf stat` of the fast ones).
 
 // `criterion_group!` expands to an undocumented `pub fn`.
@@ -538,6 +539,12 @@ fn kernels(c: &mut Criterion) {
             _ => set_max_isa(Isa::Avx512Vnni),
         }
         println!("x86-64 fast kernels: {:?}", isa());
+    }
+    #[cfg(target_arch = "aarch64")]
+    {
+        use semloc_core::nn::arm64::{neon_enabled, set_neon};
+        set_neon(std::env::var("SEMLOC_NN_ISA").as_deref() != Ok("portable"));
+        println!("aarch64 NEON kernels: {}", neon_enabled());
     }
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let mut ops = build(&mut rng);

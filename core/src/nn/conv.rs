@@ -221,9 +221,10 @@ pub fn depthwise3x3_reference(
 
 /// Depthwise 3×3, fast: the same integers as [`depthwise3x3_reference`], from the kernel
 /// `nn::dispatch` picks — on x86-64 with AVX2 `nn::x86::depthwise` (8 channels per vector;
-/// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation), else
-/// `nn::portable::depthwise` (per output pixel and 64-channel block, each valid tap adds a
-/// whole channel vector to a stack accumulator, which auto-vectorises).
+/// interior pixels sum raw inputs from `bias − zp·Σw`, vectorised requantisation), on aarch64
+/// `nn::arm64::depthwise` (NEON, 8 channels per vector), else `nn::portable::depthwise` (per
+/// output pixel and 64-channel block, each valid tap adds a whole channel vector to a stack
+/// accumulator, which auto-vectorises).
 #[allow(clippy::too_many_arguments)]
 pub fn depthwise3x3_fast(
     x: &[i8],
@@ -362,7 +363,7 @@ pub fn pointwise_reference(
 /// `i32` accumulation over the packed weights, the same integers as [`pointwise_reference`],
 /// from the kernel `nn::dispatch` picks — on x86-64 with AVX2 `nn::x86::pointwise`'s
 /// register-tiled GEMM (AVX-512 VNNI where the CPU has it) with vectorised requantisation,
-/// else `nn::portable::pointwise`.
+/// on aarch64 `nn::arm64::pointwise` (NEON, 4-pixel tiles), else `nn::portable::pointwise`.
 pub fn pointwise_fast(
     x: &[i8],
     xs: Shape,

@@ -9,22 +9,26 @@
 //! also refuse (return `false`) there, so no AVX2 instruction runs on such a CPU. Another
 //! run-time check (NEON dot products on aarch64, …) belongs in `level` and the arms below.
 //!
-//! | family                    | x86-64, CPU with AVX2                    | elsewhere             |
-//! |---------------------------|------------------------------------------|-----------------------|
-//! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `portable::conv`      |
-//! | [`depthwise3x3`]          | `x86::depthwise`                         | `portable::depthwise` |
-//! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `portable::pointwise` |
-//! | [`resize_bilinear`]       | `x86::resize`                            | `portable::resize`    |
-//! | [`add`], [`concat_input`] | `x86::eltwise`                           | `portable::eltwise`   |
-//! | [`relu`], [`avgpool`]     | —                                        | `portable::{eltwise, pool}` |
+//! | family                    | x86-64, CPU with AVX2                    | aarch64 (NEON)          | elsewhere             |
+//! |---------------------------|------------------------------------------|-------------------------|-----------------------|
+//! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `portable::conv`        | `portable::conv`      |
+//! | [`depthwise3x3`]          | `x86::depthwise`                         | `arm64::depthwise`      | `portable::depthwise` |
+//! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `arm64::pointwise`      | `portable::pointwise` |
+//! | [`resize_bilinear`]       | `x86::resize`                            | `portable::resize`      | `portable::resize`    |
+//! | [`add`], [`concat_input`] | `x86::eltwise`                           | `portable::eltwise`     | `portable::eltwise`   |
+//! | [`relu`], [`avgpool`]     | —                                        | —                       | `portable::{eltwise, pool}` |
 //!
 //! The level is the CPU's best, capped process-wide by `x86::set_max_isa` (measurements) and,
 //! in tests, per thread by [`for_each_level`], which runs a closure once per level this CPU
-//! has (the shared `kernel_equivalence!` tests use it). **Memory:** none of its own.
+//! has (the shared `kernel_equivalence!` tests use it). On aarch64 there is no run-time probe
+//! (NEON is part of the target): `arm64::set_neon` turns the NEON kernels off process-wide and
+//! [`for_each_level`] runs `neon`, then `portable`. **Memory:** none of its own.
 
-#[cfg(all(test, target_arch = "x86_64"))]
+#[cfg(all(test, any(target_arch = "x86_64", target_arch = "aarch64")))]
 use core::cell::Cell;
 
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+use super::arm64;
 use super::conv::{Conv2dParams, ConvQuant};
 use super::eltwise::{AddQuant, ConcatInput, Rescale};
 use super::pool::{AvgPoolParams, PoolQuant};
@@ -58,6 +62,24 @@ fn thread_cap() -> Isa {
 #[inline]
 pub(crate) fn level() -> Isa {
     x86::isa().min(thread_cap())
+}
+
+/// Whether the NEON kernels may run on this call: [`arm64::set_neon`] and, in tests, the
+/// thread's cap ([`for_each_level`]).
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+#[inline]
+fn neon() -> bool {
+    #[cfg(test)]
+    let cap = NEON_CAP.with(Cell::get);
+    #[cfg(not(test))]
+    let cap = true;
+    cap && arm64::neon_enabled()
+}
+
+#[cfg(all(test, target_arch = "aarch64", target_feature = "neon"))]
+std::thread_local! {
+    /// Whether the NEON kernels may run on this test thread.
+    static NEON_CAP: Cell<bool> = const { Cell::new(true) };
 }
 
 /// General conv (`os`: the output shape).
@@ -95,6 +117,10 @@ pub(crate) fn depthwise3x3(
     if level() >= Isa::Avx2 && x86::depthwise::depthwise3x3(x, xs, stride, w, b, q, out) {
         return;
     }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    if neon() && arm64::depthwise::depthwise3x3(x, xs, stride, w, b, q, out, os) {
+        return;
+    }
     portable::depthwise::depthwise3x3(x, xs, stride, w, b, q, out, os)
 }
 
@@ -114,6 +140,10 @@ pub(crate) fn pointwise(
         if level >= Isa::Avx2 && x86::pointwise::pointwise(x, xs, w, b, q, out, vnni) {
             return;
         }
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    if neon() && arm64::pointwise::pointwise(x, xs, w, b, q, out) {
+        return;
     }
     portable::pointwise::pointwise(x, xs, w, b, q, out)
 }
@@ -187,7 +217,25 @@ pub(crate) fn for_each_level(mut f: impl FnMut(&'static str)) {
             f(name);
         }
     }
-    #[cfg(not(target_arch = "x86_64"))]
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    {
+        /// Lifts the cap when dropped, also when `f` panics.
+        struct Cap;
+        impl Drop for Cap {
+            fn drop(&mut self) {
+                NEON_CAP.with(|c| c.set(true));
+            }
+        }
+        for (on, name) in [(true, "neon"), (false, "portable")] {
+            NEON_CAP.with(|c| c.set(on));
+            let _cap = Cap;
+            f(name);
+        }
+    }
+    #[cfg(not(any(
+        target_arch = "x86_64",
+        all(target_arch = "aarch64", target_feature = "neon")
+    )))]
     f("portable");
 }
 

@@ -16,8 +16,10 @@
 //!   (contiguous row slices, hoisted bounds, `chunks_exact`); the code of every target.
 //! - `x86/`, one file per op family (`pointwise`, `depthwise`, `conv1`, `resize`,
 //!   `eltwise`): AVX2 intrinsics, AVX-512 VNNI for the 1×1 GEMM, compiled into every x86-64
-//!   build (a baseline one included) and used where the CPU has them, found at run time. The
-//!   only `unsafe` of the crate. An `arm64/` family would sit beside it.
+//!   build (a baseline one included) and used where the CPU has them, found at run time.
+//! - `arm64/` (`pointwise`, `depthwise`): NEON intrinsics, compiled into every aarch64 build
+//!   (NEON is part of the target); the other families run the portable kernels there. With
+//!   `x86/`, the only `unsafe` of the crate.
 //!
 //! One shared test macro (`kernel_equivalence!`, in `testutil`) runs, per op family, the
 //! reference and the fast kernel at every instruction-set level this CPU has on seeded random
@@ -94,6 +96,8 @@
 
 use core::fmt;
 
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+pub mod arm64;
 pub mod conv;
 pub(crate) mod dispatch;
 pub mod eltwise;

@@ -22,7 +22,7 @@ fn dot(x: &[i8], w: &[i8], zp: i32) -> i32 {
 
 /// The valid tap range `[k0, k1)` of a window starting at `start − pad` on an axis of `n`.
 #[inline]
-pub(super) fn tap_range(o: usize, stride: usize, pad: usize, k: usize, n: usize) -> (usize, usize) {
+pub(crate) fn tap_range(o: usize, stride: usize, pad: usize, k: usize, n: usize) -> (usize, usize) {
     let start = o * stride;
     let k0 = pad.saturating_sub(start);
     let k1 = k.min((n + pad).saturating_sub(start));

@@ -1,7 +1,7 @@
 //! # x86: x86-64 AVX2 and AVX-512 VNNI forms of the int8 kernels
 //!
 //! One file per op family, as tract's `linalg/src/x86_64_fma`, beside the safe
-//! `nn::portable` kernels (and, later, an `arm64` family):
+//! `nn::portable` kernels (and the `nn::arm64` NEON family):
 //!
 //! | file        | ONNX op                                           | ISA                | stack   |
 //! |-------------|---------------------------------------------------|--------------------|---------|

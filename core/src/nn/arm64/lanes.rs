@@ -1,0 +1,122 @@
+//! # lanes: the requantisation of 8 `i32` lanes in NEON
+//!
+//! [`Rq8`] holds 8 requantisers in the lane form of `nn::quant`'s `Lanes8` and computes
+//! `clamp(zp + apply(acc), lo, hi)` for two `int32x4_t` with the same integers as
+//! [`Requant::to_i8`], for `|acc| · 2^left ≤ 2^30` ([`super::super::quant::fits_simd_requant`]):
+//! 1. `sshl` by `left` (no saturation under the bound),
+//! 2. `sqrdmulh` by the multiplier: `sat((2·v·M + 2^31) >> 32)` = `floor((v·M + 2^30) / 2^31)`,
+//!    gemmlowp's `SaturatingRoundingDoublingHighMul` (its only saturating case, `v = M =
+//!    i32::MIN`, cannot occur: `M ≥ 0`),
+//! 3. gemmlowp's `RoundingDivideByPOT` as the portable lanes compute it: `(s >> e) +
+//!    ((s & mask) > half − (s >> 31))`, the shift an `sshl` by `−e`,
+//! 4. `+ zp`, clamp to `[lo, hi]` (within `i8`), two narrowing moves.
+
+use core::arch::aarch64::*;
+
+use crate::nn::quant::Requant;
+
+/// Up to 8 requantisers in NEON lane form (missing lanes: zero multiplier, output `zp`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Rq8 {
+    m: [i32; 8],
+    left: [i32; 8],
+    /// `−e`: `sshl` by it is the arithmetic right shift by `e`.
+    right: [i32; 8],
+    mask: [i32; 8],
+    half: [i32; 8],
+}
+
+/// [`Rq8`]'s constants in registers, for a loop that requantises many pixels of one group.
+#[derive(Clone, Copy)]
+pub(crate) struct Rq8Regs {
+    m: [int32x4_t; 2],
+    left: [int32x4_t; 2],
+    right: [int32x4_t; 2],
+    mask: [int32x4_t; 2],
+    half: [int32x4_t; 2],
+    zp: int32x4_t,
+    lo: int32x4_t,
+    hi: int32x4_t,
+}
+
+impl Rq8 {
+    /// All lanes zero.
+    pub(crate) const ZERO: Rq8 =
+        Rq8 { m: [0; 8], left: [0; 8], right: [0; 8], mask: [0; 8], half: [0; 8] };
+
+    /// From up to 8 requantisers.
+    pub(crate) fn new(r: &[Requant]) -> Self {
+        let mut l = Rq8::ZERO;
+        for (i, q) in r.iter().take(8).enumerate() {
+            let e = (-q.shift).clamp(0, 31);
+            l.m[i] = q.multiplier;
+            l.left[i] = q.shift.clamp(0, 30);
+            l.right[i] = -e;
+            l.mask[i] = ((1i64 << e) - 1) as i32;
+            l.half[i] = l.mask[i] >> 1;
+        }
+        l
+    }
+
+    /// The constants in registers, with the output zero point and clamp range.
+    #[target_feature(enable = "neon")]
+    #[inline]
+    pub(crate) fn regs(&self, zp: i32, lo: i32, hi: i32) -> Rq8Regs {
+        let two = |a: &[i32; 8]| {
+            let (l, h) = a.split_at(4);
+            // SAFETY: `l` and `h` are 4 `i32`s each.
+            unsafe { [vld1q_s32(l.as_ptr()), vld1q_s32(h.as_ptr())] }
+        };
+        Rq8Regs {
+            m: two(&self.m),
+            left: two(&self.left),
+            right: two(&self.right),
+            mask: two(&self.mask),
+            half: two(&self.half),
+            zp: vdupq_n_s32(zp),
+            lo: vdupq_n_s32(lo),
+            hi: vdupq_n_s32(hi),
+        }
+    }
+}
+
+impl Rq8Regs {
+    /// `clamp(zp + apply(acc), lo, hi)` of the 8 lanes `acc[0] ++ acc[1]`, as `i8`.
+    #[target_feature(enable = "neon")]
+    #[inline]
+    pub(crate) fn requant(&self, acc: [int32x4_t; 2]) -> int8x8_t {
+        let (a, b) = (self.half4(acc[0], 0), self.half4(acc[1], 1));
+        vmovn_s16(vcombine_s16(vmovn_s32(a), vmovn_s32(b)))
+    }
+
+    /// Lanes `4j..4j + 4` of [`Rq8Regs::requant`], before narrowing.
+    #[target_feature(enable = "neon")]
+    #[inline]
+    fn half4(&self, acc: int32x4_t, j: usize) -> int32x4_t {
+        let v = vshlq_s32(acc, self.left[j]);
+        let s = vqrdmulhq_s32(v, self.m[j]);
+        // half + 1 where s < 0 (`s >> 31` is −1 there)
+        let t = vsubq_s32(self.half[j], vshrq_n_s32::<31>(s));
+        let up = vcgtq_s32(vandq_s32(s, self.mask[j]), t);
+        // a true compare is all ones (−1): subtracting it adds one
+        let q = vsubq_s32(vshlq_s32(s, self.right[j]), vreinterpretq_s32_u32(up));
+        vminq_s32(vmaxq_s32(vaddq_s32(q, self.zp), self.lo), self.hi)
+    }
+}
+
+/// Stores the first `min(8, out.len())` lanes of `v` to `out`.
+#[target_feature(enable = "neon")]
+#[inline]
+pub(crate) fn store8(out: &mut [i8], v: int8x8_t) {
+    match <&mut [i8; 8]>::try_from(&mut *out) {
+        // SAFETY: 8 bytes of `out`.
+        Ok(o) => unsafe { vst1_s8(o.as_mut_ptr(), v) },
+        Err(_) => {
+            let mut t = [0i8; 8];
+            // SAFETY: 8 bytes of `t`.
+            unsafe { vst1_s8(t.as_mut_ptr(), v) };
+            let n = out.len().min(8);
+            out[..n].copy_from_slice(&t[..n]);
+        }
+    }
+}
