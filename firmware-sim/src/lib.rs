@@ -14,6 +14,8 @@
 //!   the 192×640 segmentation network.
 //! * [`report`] prints poses as `f64` bit patterns and hashes them (FNV-1a), the same text on
 //!   every target; [`report::run_embedded`] is the one driver all binaries call.
+//! * [`kernel_check`] holds this build's fast int8 kernels (NEON on aarch64) to the reference
+//!   kernels on seeded random convs, on the target itself (`qemu_aarch64` runs it first).
 //!
 //! * `sim` (feature `std`): the localiser as an ECU task on the host: fixed state built once,
 //!   a simulated 10 Hz sensor clock feeding a bounded frame ring, a per-frame deadline with a
@@ -35,6 +37,7 @@
 #![forbid(unsafe_code)]
 
 pub mod embedded;
+pub mod kernel_check;
 pub mod report;
 #[cfg(feature = "std")]
 pub mod sim;

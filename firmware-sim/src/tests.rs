@@ -225,3 +225,15 @@ fn network_labelling_names_a_short_buffer_and_a_mismatched_stage() {
         }
     });
 }
+
+/// The on-target kernel check (`qemu_aarch64` runs it with these arguments) passes on the
+/// host's kernels too, and a different seed draws different cases.
+#[test]
+fn kernel_check_passes_on_this_build() {
+    use crate::kernel_check::{run, KernelCheckBuffers, KernelCheckReport};
+    let mut buf = Box::new(KernelCheckBuffers::new());
+    for seed in [0x5e10_c0de, 7] {
+        let r = run(&mut buf, seed, 500).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        assert_eq!(r, KernelCheckReport { pointwise: 500, depthwise: 500 });
+    }
+}

@@ -1,5 +1,7 @@
 //! Bare-metal image for `aarch64-unknown-none` on QEMU's `virt` board (Cortex-A72, EL1, MMU
-//! off, one core): runs the embedded stereo frames through `Localiser` twice, geometric and
+//! off, one core): checks its fast int8 kernels (NEON) against the reference kernels
+//! (`kernel_check`, exit status 1 on a difference), runs the embedded stereo frames through
+//! `Localiser` twice, geometric and
 //! then semantic (int8 network, semantic ORB, EM association), prints the report of
 //! `semloc_firmware_sim::report` through ARM semihosting, then exits QEMU with status 0 when
 //! the tracker tracked in both passes, 2 when it did not, 1 on an error and 101 on a panic.
@@ -44,6 +46,7 @@ mod fw {
     use semloc_firmware_sim::core_crate::seg::WeightScheme;
     use semloc_firmware_sim::core_crate::tracker::TrackerParams;
     use semloc_firmware_sim::embedded::{HEIGHT, MODEL_BLOB, WIDTH};
+    use semloc_firmware_sim::kernel_check::{self, KernelCheckBuffers};
     use semloc_firmware_sim::report::{self, RunSummary};
     use semloc_firmware_sim::{
         embedded_localiser, geometric_params, semantic_params, Localiser, LocaliserError, Network,
@@ -242,6 +245,18 @@ mod fw {
 
     static SEG_STORAGE: SegSlot = SegSlot(UnsafeCell::new(SegStorage::new()));
 
+    /// The kernel check's buffers (≈ 168 KB of zeros: `.bss`).
+    struct CheckSlot(UnsafeCell<KernelCheckBuffers>);
+
+    // SAFETY: as `Slot`; only `rust_main` takes a reference, once.
+    unsafe impl Sync for CheckSlot {}
+
+    static CHECK_BUFFERS: CheckSlot = CheckSlot(UnsafeCell::new(KernelCheckBuffers::new()));
+
+    /// Seed and cases per op family of the kernel check (`kernel_check`).
+    const CHECK_SEED: u64 = 0x5e10_c0de;
+    const CHECK_CASES: u32 = 500;
+
     /// Builds a localiser with `params` and `semantics` in its static slot, replacing the previous one. Not
     /// inlined: the by-value temporaries of the constructors (tens of MiB at worst) are in
     /// this frame, popped before frames run.
@@ -304,6 +319,25 @@ mod fw {
     extern "C" fn rust_main() -> ! {
         let mut con = Console::new();
         let (t0, frq) = counter();
+        // SAFETY: see `CheckSlot`: the only reference to the buffers ever made.
+        let check = unsafe { &mut *CHECK_BUFFERS.0.get() };
+        match kernel_check::run(check, CHECK_SEED, CHECK_CASES) {
+            Ok(r) => {
+                let _ = writeln!(
+                    con,
+                    "@ kernels: {} 1x1 and {} depthwise convs bit-equal to the reference, {:.1} ms",
+                    r.pointwise,
+                    r.depthwise,
+                    ms_since(t0)
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(con, "error: {e}");
+                con.flush();
+                exit(1)
+            }
+        }
+        let (t0, _) = counter();
         let loc = build(&mut con, geometric_params(), None);
         let _ = writeln!(
             con,

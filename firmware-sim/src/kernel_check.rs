@@ -1,0 +1,263 @@
+//! # kernel_check: the fast int8 kernels against the references, on the target itself
+//!
+//! A self-test of the network's two heaviest op families as *this build* runs them: the NEON
+//! kernels on aarch64 (`nn::arm64`), AVX2 / AVX-512 VNNI or the portable ones on x86-64, the
+//! portable ones on Cortex-M. Seeded random 1×1 and depthwise 3×3 convs whose shapes straddle
+//! every kernel's blocking — 1×1 rows around the 1024-channel stage, more than 256 output
+//! channels (the requantisers the kernels make once), channel counts that are not a multiple
+//! of 8, 1 to 25 pixels (the 4-pixel tiles), stride 1 and 2 on maps down to 1×1 (the borders),
+//! and every 10th case biases too large for the vector requantisation (the fallback) — and
+//! each `*_fast` output must equal `*_reference`'s bit for bit.
+//!
+//! `qemu_aarch64` runs it before the frames (an `@ kernels` line; exit status 1 on a
+//! mismatch), so CI checks the NEON kernels in the bare-metal build itself; the crate's tests
+//! run it on the host. The core crate's `kernel_equivalence!` tests hold the same kernels on
+//! more shapes where a test harness runs (x86-64, or aarch64 under `qemu-aarch64`).
+//!
+//! **Memory:** [`KernelCheckBuffers`], ≈ 168 KB of zeros (`.bss` in a `static`).
+
+use core::fmt;
+
+use semloc_core::nn::conv::{
+    depthwise3x3_fast, depthwise3x3_output_shape, depthwise3x3_reference, pack_pointwise,
+    pointwise_fast, pointwise_packed_len, pointwise_reference, ConvQuant,
+};
+use semloc_core::nn::{NnError, Requant, Shape};
+
+/// Input bytes: 25 pixels × 1100 channels, or 300 channels × 9 × 9.
+const X: usize = 27_500;
+/// Weights (unpacked and packed): 40 × 1100 or 270 × 40 (1×1), 9 × 300 (depthwise).
+const W: usize = 44_000;
+/// Output channels or depthwise channels.
+const C: usize = 300;
+/// Output bytes.
+const O: usize = 24_300;
+
+/// The check's working memory (all zeros: a `static` of it lands in `.bss`).
+pub struct KernelCheckBuffers {
+    x: [i8; X],
+    w: [i8; W],
+    packed: [i8; W],
+    bias: [i32; C],
+    requant: [Requant; C],
+    fast: [i8; O],
+    reference: [i8; O],
+}
+
+impl KernelCheckBuffers {
+    /// Bytes of one buffer set.
+    pub const MEMORY_BYTES: usize = core::mem::size_of::<KernelCheckBuffers>();
+
+    /// Zeroed buffers.
+    pub const fn new() -> Self {
+        Self {
+            x: [0; X],
+            w: [0; W],
+            packed: [0; W],
+            bias: [0; C],
+            requant: [Requant { multiplier: 0, shift: 0 }; C],
+            fast: [0; O],
+            reference: [0; O],
+        }
+    }
+}
+
+impl Default for KernelCheckBuffers {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Cases that passed, per op family.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KernelCheckReport {
+    /// 1×1 convs.
+    pub pointwise: u32,
+    /// Depthwise 3×3 convs.
+    pub depthwise: u32,
+}
+
+/// Why the check failed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KernelCheckError {
+    /// The fast kernel's output differs from the reference's.
+    Mismatch {
+        /// `"pointwise"` or `"depthwise"`.
+        op: &'static str,
+        /// The case number (with the seed, it regenerates the case).
+        case: u32,
+        /// Its input shape.
+        shape: Shape,
+        /// The first differing output byte.
+        index: usize,
+    },
+    /// A kernel refused the operands (a bug of this generator: every case is valid).
+    Nn {
+        /// `"pointwise"` or `"depthwise"`.
+        op: &'static str,
+        /// The case number.
+        case: u32,
+        /// The kernel's error.
+        error: NnError,
+    },
+}
+
+impl fmt::Display for KernelCheckError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            KernelCheckError::Mismatch { op, case, shape, index } => write!(
+                f,
+                "kernel check: {op} case {case} ({}x{}x{}, CxHxW): the fast kernel differs \
+                 from the reference at output byte {index}",
+                shape.c, shape.h, shape.w
+            ),
+            KernelCheckError::Nn { op, case, error } => {
+                write!(f, "kernel check: {op} case {case} rejected: {error}")
+            }
+        }
+    }
+}
+
+/// SplitMix64: a small, seeded, portable generator.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// A fair coin.
+    fn coin(&mut self) -> bool {
+        self.next() & 1 == 1
+    }
+
+    /// Uniform in `lo..=hi`.
+    fn range(&mut self, lo: usize, hi: usize) -> usize {
+        lo + (self.next() % (hi - lo + 1) as u64) as usize
+    }
+
+    fn i8s(&mut self, out: &mut [i8]) {
+        for v in out {
+            *v = self.next() as i8;
+        }
+    }
+
+    /// A zero point, often near −128 as after a ReLU.
+    fn zp(&mut self) -> i32 {
+        if self.coin() {
+            -128 + self.range(0, 8) as i32
+        } else {
+            self.range(0, 255) as i32 - 128
+        }
+    }
+
+    /// Biases up to `±bmax` and requantisers of the network's range (`2^-14 … 2^-6`) into
+    /// the first `n` entries.
+    fn quant(&mut self, n: usize, bmax: i32, bias: &mut [i32], requant: &mut [Requant]) {
+        for (b, r) in bias[..n].iter_mut().zip(&mut requant[..n]) {
+            *b = (self.next() % (2 * bmax as u64 + 1)) as i32 - bmax;
+            let e = self.range(6, 14) as i32;
+            let frac = 1.0 + (self.next() % 1024) as f64 / 1024.0;
+            *r = Requant::from_scale(frac / (1u64 << e) as f64);
+        }
+    }
+}
+
+/// The index of the first byte where `a` and `b` differ.
+fn first_difference(a: &[i8], b: &[i8]) -> Option<usize> {
+    a.iter().zip(b).position(|(x, y)| x != y)
+}
+
+/// Runs `cases` 1×1 and `cases` depthwise cases from `seed`; the report, or the first failure.
+pub fn run(
+    buf: &mut KernelCheckBuffers,
+    seed: u64,
+    cases: u32,
+) -> Result<KernelCheckReport, KernelCheckError> {
+    let mut rng = Rng(seed);
+    for case in 0..cases {
+        pointwise_case(buf, &mut rng, case)?;
+    }
+    for case in 0..cases {
+        depthwise_case(buf, &mut rng, case)?;
+    }
+    Ok(KernelCheckReport { pointwise: cases, depthwise: cases })
+}
+
+fn pointwise_case(
+    buf: &mut KernelCheckBuffers,
+    rng: &mut Rng,
+    case: u32,
+) -> Result<(), KernelCheckError> {
+    let op = "pointwise";
+    let nn = |error| KernelCheckError::Nn { op, case, error };
+    // every 10th row around the NEON and portable kernels' 1024-channel stage, every 7th
+    // more than 256 output channels (never both: the buffers hold one or the other)
+    let (ci, co) = match case {
+        c if c % 10 == 3 => (rng.range(1000, 1100), rng.range(1, 40)),
+        c if c % 7 == 5 => (rng.range(1, 40), rng.range(250, 270)),
+        _ => (rng.range(1, 40), rng.range(1, 40)),
+    };
+    let xs = Shape::new(ci, rng.range(1, 5), rng.range(1, 5));
+    let bmax = if case % 10 == 9 { 1 << 30 } else { 20_000 };
+    let q = ConvQuant {
+        input_zero_point: rng.zp(),
+        output_zero_point: rng.zp(),
+        requant: &[],
+        relu: rng.coin(),
+    };
+    rng.i8s(&mut buf.x[..xs.len()]);
+    rng.i8s(&mut buf.w[..co * ci]);
+    rng.quant(co, bmax, &mut buf.bias, &mut buf.requant);
+    let plen = pointwise_packed_len(co, ci);
+    pack_pointwise(&buf.w[..co * ci], co, ci, &mut buf.packed[..plen]).map_err(nn)?;
+    let q = ConvQuant { requant: &buf.requant[..co], ..q };
+    let n = xs.h * xs.w * co;
+    let (x, w, b) = (&buf.x[..xs.len()], &buf.packed[..plen], &buf.bias[..co]);
+    pointwise_reference(x, xs, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
+    pointwise_fast(x, xs, w, b, &q, &mut buf.fast[..n]).map_err(nn)?;
+    match first_difference(&buf.fast[..n], &buf.reference[..n]) {
+        Some(index) => Err(KernelCheckError::Mismatch { op, case, shape: xs, index }),
+        None => Ok(()),
+    }
+}
+
+fn depthwise_case(
+    buf: &mut KernelCheckBuffers,
+    rng: &mut Rng,
+    case: u32,
+) -> Result<(), KernelCheckError> {
+    let op = "depthwise";
+    let nn = |error| KernelCheckError::Nn { op, case, error };
+    // every 9th more than 256 channels, every 5th a network-like width, else narrow groups
+    let c = match case {
+        c if c % 9 == 4 => rng.range(250, 300),
+        c if c % 5 == 0 => rng.range(60, 140),
+        _ => rng.range(1, 20),
+    };
+    let xs = Shape::new(c, rng.range(1, 9), rng.range(1, 9));
+    let stride = rng.range(1, 2);
+    let bmax = if case % 10 == 9 { 1 << 30 } else { 5000 };
+    let q = ConvQuant {
+        input_zero_point: rng.zp(),
+        output_zero_point: rng.zp(),
+        requant: &[],
+        relu: rng.coin(),
+    };
+    rng.i8s(&mut buf.x[..xs.len()]);
+    rng.i8s(&mut buf.w[..9 * c]);
+    rng.quant(c, bmax, &mut buf.bias, &mut buf.requant);
+    let q = ConvQuant { requant: &buf.requant[..c], ..q };
+    let n = depthwise3x3_output_shape(xs, stride).map_err(nn)?.len();
+    let (x, w, b) = (&buf.x[..xs.len()], &buf.w[..9 * c], &buf.bias[..c]);
+    depthwise3x3_reference(x, xs, stride, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
+    depthwise3x3_fast(x, xs, stride, w, b, &q, &mut buf.fast[..n]).map_err(nn)?;
+    match first_difference(&buf.fast[..n], &buf.reference[..n]) {
+        Some(index) => Err(KernelCheckError::Mismatch { op, case, shape: xs, index }),
+        None => Ok(()),
+    }
+}
