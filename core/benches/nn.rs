@@ -15,7 +15,9 @@
 //! `SEMLOC_NN_REPS=n` sets the repetitions of the table (default 5), `SEMLOC_NN_KINDS=pw,dw`
 //! limits it to some kinds, and `SEMLOC_NN_ISA=portable|avx2` caps the x86 fast kernels at the
 //! portable (safe, auto-vectorised) or the AVX2 ones (to compare them on a VNNI machine;
-//! `portable` also turns the aarch64 NEON kernels off); `SEMLOC_NN_NOREF=1` skips timing the reference
+//! `portable` also turns the aarch64 NEON kernels off); `SEMLOC_NN_SEQ_ONLY=1` runs each op
+//! once and repeats only the per-kind frames (instruction counts under `qemu-aarch64`: the
+//! difference between two repetition counts is whole frames); `SEMLOC_NN_NOREF=1` skips timing the reference
 //! kernels (for `perf stat` of the fast ones).
 
 // `criterion_group!` expands to an undocumented `pub fn`.
@@ -345,6 +347,7 @@ fn table(ops: &[Op]) {
     let mut per_kind = vec![(0.0f64, 0.0f64, 0u64, 0usize); KINDS.len()];
     let only = std::env::var("SEMLOC_NN_KINDS").unwrap_or_default();
     let no_ref = std::env::var("SEMLOC_NN_NOREF").is_ok_and(|v| v == "1");
+    let seq_only = std::env::var("SEMLOC_NN_SEQ_ONLY").is_ok_and(|v| v == "1");
     println!("\nper op (ms per execution; fast/ref bit-equal checked):");
     for op in ops {
         if !only.is_empty() && !only.split(',').any(|k| k == op.kind) {
@@ -360,7 +363,9 @@ fn table(ops: &[Op]) {
         } else {
             best(reps.div_ceil(2).max(1), &mut || exec(op, false, black_box(&mut r)))
         };
-        let tf = best(reps, &mut || exec(op, true, black_box(&mut f)));
+        // SEMLOC_NN_SEQ_ONLY=1: only the per-kind frames below are repeated (instruction
+        // counts under an emulator: the difference of two `SEMLOC_NN_REPS` is whole frames)
+        let tf = best(if seq_only { 1 } else { reps }, &mut || exec(op, true, black_box(&mut f)));
         let k = KINDS.iter().position(|&k| k == op.kind).unwrap();
         let e = &mut per_kind[k];
         e.0 += tr * op.count as f64;

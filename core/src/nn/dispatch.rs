@@ -11,10 +11,10 @@
 //!
 //! | family                    | x86-64, CPU with AVX2                    | aarch64 (NEON)          | elsewhere             |
 //! |---------------------------|------------------------------------------|-------------------------|-----------------------|
-//! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `portable::conv`        | `portable::conv`      |
+//! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `arm64::conv1` (same)   | `portable::conv`      |
 //! | [`depthwise3x3`]          | `x86::depthwise`                         | `arm64::depthwise`      | `portable::depthwise` |
 //! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `arm64::pointwise`      | `portable::pointwise` |
-//! | [`resize_bilinear`]       | `x86::resize`                            | `portable::resize`      | `portable::resize`    |
+//! | [`resize_bilinear`]       | `x86::resize`                            | `arm64::resize`         | `portable::resize`    |
 //! | [`add`], [`concat_input`] | `x86::eltwise`                           | `portable::eltwise`     | `portable::eltwise`   |
 //! | [`relu`], [`avgpool`]     | —                                        | —                       | `portable::{eltwise, pool}` |
 //!
@@ -98,6 +98,10 @@ pub(crate) fn conv2d(
     if level() >= Isa::Avx2 && x86::conv1::conv3x3_c1(x, xs, p, w, b, q, out, os) {
         return;
     }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    if neon() && arm64::conv1::conv3x3_c1(x, xs, p, w, b, q, out, os) {
+        return;
+    }
     portable::conv::conv2d(x, xs, p, w, b, q, out, os)
 }
 
@@ -152,6 +156,10 @@ pub(crate) fn pointwise(
 pub(crate) fn resize_bilinear(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i8], os: Shape) {
     #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::resize::resize_bilinear(x, xs, q, out, os) {
+        return;
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    if neon() && arm64::resize::resize_bilinear(x, xs, q, out, os) {
         return;
     }
     portable::resize::resize_bilinear(x, xs, q, out, os)
