@@ -1,13 +1,15 @@
 //! # kernel_check: the fast int8 kernels against the references, on the target itself
 //!
-//! A self-test of the network's two heaviest op families as *this build* runs them: the NEON
-//! kernels on aarch64 (`nn::arm64`), AVX2 / AVX-512 VNNI or the portable ones on x86-64, the
-//! portable ones on Cortex-M. Seeded random 1×1 and depthwise 3×3 convs whose shapes straddle
-//! every kernel's blocking — 1×1 rows around the 1024-channel stage, more than 256 output
-//! channels (the requantisers the kernels make once), channel counts that are not a multiple
-//! of 8, 1 to 25 pixels (the 4-pixel tiles), stride 1 and 2 on maps down to 1×1 (the borders),
-//! and every 10th case biases too large for the vector requantisation (the fallback) — and
-//! each `*_fast` output must equal `*_reference`'s bit for bit.
+//! A self-test of the op families that have instruction-set kernels, as *this build* runs
+//! them: the NEON kernels on aarch64 (`nn::arm64`), AVX2 / AVX-512 VNNI or the portable ones on
+//! x86-64, the portable ones on Cortex-M. Seeded random 1×1 convs, depthwise 3×3 convs, 3×3
+//! convs of a one-channel map and bilinear resizes whose shapes straddle every kernel's
+//! blocking — 1×1 rows around the 1024-channel stage, more than 256 output channels (the
+//! requantisers the kernels make once), more than 64 first-layer channels, channel counts that
+//! are not a multiple of 8 (11 classes), 1 to 25 pixels (the 4-pixel tiles), stride 1 and 2 and
+//! padding 0 and 1 on maps down to 1×1 (the borders), up- and downsampling, and every 10th
+//! case biases too large for the vector requantisation (the fallback) — and each `*_fast`
+//! output must equal `*_reference`'s bit for bit.
 //!
 //! `qemu_aarch64` runs it before the frames (an `@ kernels` line; exit status 1 on a
 //! mismatch), so CI checks the NEON kernels in the bare-metal build itself; the crate's tests
@@ -19,9 +21,11 @@
 use core::fmt;
 
 use semloc_core::nn::conv::{
-    depthwise3x3_fast, depthwise3x3_output_shape, depthwise3x3_reference, pack_pointwise,
-    pointwise_fast, pointwise_packed_len, pointwise_reference, ConvQuant,
+    conv2d_fast, conv2d_reference, depthwise3x3_fast, depthwise3x3_output_shape,
+    depthwise3x3_reference, pack_pointwise, pointwise_fast, pointwise_packed_len,
+    pointwise_reference, Conv2dParams, ConvQuant,
 };
+use semloc_core::nn::resize::{resize_bilinear_fast, resize_bilinear_reference, ResizeQuant};
 use semloc_core::nn::{NnError, Requant, Shape};
 
 /// Input bytes: 25 pixels × 1100 channels, or 300 channels × 9 × 9.
@@ -68,13 +72,17 @@ impl Default for KernelCheckBuffers {
     }
 }
 
-/// Cases that passed, per op family.
+/// Cases that passed, per op family (the same number of each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct KernelCheckReport {
     /// 1×1 convs.
     pub pointwise: u32,
     /// Depthwise 3×3 convs.
     pub depthwise: u32,
+    /// 3×3 convs of a one-channel map (the first layer's geometry).
+    pub first_conv: u32,
+    /// Bilinear resizes.
+    pub resize: u32,
 }
 
 /// Why the check failed.
@@ -82,7 +90,7 @@ pub struct KernelCheckReport {
 pub enum KernelCheckError {
     /// The fast kernel's output differs from the reference's.
     Mismatch {
-        /// `"pointwise"` or `"depthwise"`.
+        /// `"pointwise"`, `"depthwise"`, `"first conv"` or `"resize"`.
         op: &'static str,
         /// The case number (with the seed, it regenerates the case).
         case: u32,
@@ -93,7 +101,7 @@ pub enum KernelCheckError {
     },
     /// A kernel refused the operands (a bug of this generator: every case is valid).
     Nn {
-        /// `"pointwise"` or `"depthwise"`.
+        /// As in `Mismatch`.
         op: &'static str,
         /// The case number.
         case: u32,
@@ -185,7 +193,94 @@ pub fn run(
     for case in 0..cases {
         depthwise_case(buf, &mut rng, case)?;
     }
-    Ok(KernelCheckReport { pointwise: cases, depthwise: cases })
+    for case in 0..cases {
+        first_conv_case(buf, &mut rng, case)?;
+    }
+    for case in 0..cases {
+        resize_case(buf, &mut rng, case)?;
+    }
+    Ok(KernelCheckReport { pointwise: cases, depthwise: cases, first_conv: cases, resize: cases })
+}
+
+/// `Err(Mismatch)` at the first byte where the fast output (`buf.fast[..n]`) differs.
+fn compare(
+    buf: &KernelCheckBuffers,
+    n: usize,
+    op: &'static str,
+    case: u32,
+    shape: Shape,
+) -> Result<(), KernelCheckError> {
+    match first_difference(&buf.fast[..n], &buf.reference[..n]) {
+        Some(index) => Err(KernelCheckError::Mismatch { op, case, shape, index }),
+        None => Ok(()),
+    }
+}
+
+fn first_conv_case(
+    buf: &mut KernelCheckBuffers,
+    rng: &mut Rng,
+    case: u32,
+) -> Result<(), KernelCheckError> {
+    let op = "first conv";
+    let nn = |error| KernelCheckError::Nn { op, case, error };
+    // up to 64 output channels take the NEON and x86 kernels, a few more the portable one
+    let co = if case % 8 == 7 { rng.range(65, 66) } else { rng.range(1, 64) };
+    let xs = Shape::new(1, rng.range(1, 12), rng.range(1, 30));
+    let pads: [usize; 4] = core::array::from_fn(|_| rng.range(0, 1));
+    let stride = (rng.range(1, 2), rng.range(1, 2));
+    let mut p = Conv2dParams { c_out: co, kernel: (3, 3), stride, pads };
+    // a map smaller than the kernel has an output only with padding
+    let os = match p.output_shape(xs) {
+        Ok(os) => os,
+        Err(_) => {
+            p.pads = [1; 4];
+            p.output_shape(xs).map_err(nn)?
+        }
+    };
+    let bmax = if case % 10 == 9 { 1 << 30 } else { 100_000 };
+    let q = ConvQuant {
+        input_zero_point: rng.zp(),
+        output_zero_point: rng.zp(),
+        requant: &[],
+        relu: rng.coin(),
+    };
+    rng.i8s(&mut buf.x[..xs.len()]);
+    rng.i8s(&mut buf.w[..9 * co]);
+    rng.quant(co, bmax, &mut buf.bias, &mut buf.requant);
+    let q = ConvQuant { requant: &buf.requant[..co], ..q };
+    let n = os.len();
+    let (x, w, b) = (&buf.x[..xs.len()], &buf.w[..9 * co], &buf.bias[..co]);
+    conv2d_reference(x, xs, &p, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
+    conv2d_fast(x, xs, &p, w, b, &q, &mut buf.fast[..n]).map_err(nn)?;
+    compare(buf, n, op, case, xs)
+}
+
+fn resize_case(
+    buf: &mut KernelCheckBuffers,
+    rng: &mut Rng,
+    case: u32,
+) -> Result<(), KernelCheckError> {
+    let op = "resize";
+    let nn = |error| KernelCheckError::Nn { op, case, error };
+    // the network's 11 classes and 128 channels now and then, else up to 20 (short groups)
+    let (c, size) = match case % 4 {
+        0 => (11, (rng.range(1, 24), rng.range(1, 40))),
+        1 => (rng.range(120, 130), (rng.range(1, 12), rng.range(1, 15))),
+        _ => (rng.range(1, 20), (rng.range(1, 24), rng.range(1, 40))),
+    };
+    let xs = Shape::new(c, rng.range(1, 6), rng.range(1, 8));
+    let q = ResizeQuant::new(
+        0.01 + (rng.next() % 90) as f64 / 1000.0,
+        rng.zp(),
+        0.01 + (rng.next() % 90) as f64 / 1000.0,
+        rng.zp(),
+    );
+    rng.i8s(&mut buf.x[..xs.len()]);
+    let n = c * size.0 * size.1;
+    let x = &buf.x[..xs.len()];
+    resize_bilinear_reference(x, xs, size, &q, &mut buf.reference[..n]).map_err(nn)?;
+    resize_bilinear_fast(x, xs, size, &q, &mut buf.fast[..n]).map_err(nn)?;
+    compare(buf, n, op, case, xs)
 }
 
 fn pointwise_case(
@@ -220,10 +315,7 @@ fn pointwise_case(
     let (x, w, b) = (&buf.x[..xs.len()], &buf.packed[..plen], &buf.bias[..co]);
     pointwise_reference(x, xs, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
     pointwise_fast(x, xs, w, b, &q, &mut buf.fast[..n]).map_err(nn)?;
-    match first_difference(&buf.fast[..n], &buf.reference[..n]) {
-        Some(index) => Err(KernelCheckError::Mismatch { op, case, shape: xs, index }),
-        None => Ok(()),
-    }
+    compare(buf, n, op, case, xs)
 }
 
 fn depthwise_case(
@@ -256,8 +348,5 @@ fn depthwise_case(
     let (x, w, b) = (&buf.x[..xs.len()], &buf.w[..9 * c], &buf.bias[..c]);
     depthwise3x3_reference(x, xs, stride, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
     depthwise3x3_fast(x, xs, stride, w, b, &q, &mut buf.fast[..n]).map_err(nn)?;
-    match first_difference(&buf.fast[..n], &buf.reference[..n]) {
-        Some(index) => Err(KernelCheckError::Mismatch { op, case, shape: xs, index }),
-        None => Ok(()),
-    }
+    compare(buf, n, op, case, xs)
 }

@@ -325,9 +325,12 @@ mod fw {
             Ok(r) => {
                 let _ = writeln!(
                     con,
-                    "@ kernels: {} 1x1 and {} depthwise convs bit-equal to the reference, {:.1} ms",
+                    "@ kernels: {} 1x1, {} depthwise, {} first-layer convs and {} resizes \
+                     bit-equal to the reference, {:.1} ms",
                     r.pointwise,
                     r.depthwise,
+                    r.first_conv,
+                    r.resize,
                     ms_since(t0)
                 );
             }
