@@ -4,7 +4,7 @@
 //! them: the NEON kernels on aarch64 (`nn::arm64`), AVX2 / AVX-512 VNNI or the portable ones on
 //! x86-64, the portable ones on Cortex-M. Seeded random 1×1 convs, depthwise 3×3 convs, 3×3
 //! convs of a one-channel map and bilinear resizes whose shapes straddle every kernel's
-//! blocking — 1×1 rows around the 1024-channel stage, more than 256 output channels (the
+//! blocking — 1×1 rows of 1 to 2100 channels (the stages and tiles), more than 256 output channels (the
 //! requantisers the kernels make once), more than 64 first-layer channels, channel counts that
 //! are not a multiple of 8 (11 classes), 1 to 25 pixels (the 4-pixel tiles), stride 1 and 2 and
 //! padding 0 and 1 on maps down to 1×1 (the borders), up- and downsampling, and every 10th
@@ -28,9 +28,9 @@ use semloc_core::nn::conv::{
 use semloc_core::nn::resize::{resize_bilinear_fast, resize_bilinear_reference, ResizeQuant};
 use semloc_core::nn::{NnError, Requant, Shape};
 
-/// Input bytes: 25 pixels × 1100 channels, or 300 channels × 9 × 9.
+/// Input bytes: 25 pixels × 1100 channels, 9 × 2100, or 300 channels × 9 × 9.
 const X: usize = 27_500;
-/// Weights (unpacked and packed): 40 × 1100 or 270 × 40 (1×1), 9 × 300 (depthwise).
+/// Weights (unpacked and packed): 40 × 1100, 16 × 2100 or 270 × 40 (1×1), 9 × 300 (depthwise).
 const W: usize = 44_000;
 /// Output channels or depthwise channels.
 const C: usize = 300;
@@ -290,14 +290,17 @@ fn pointwise_case(
 ) -> Result<(), KernelCheckError> {
     let op = "pointwise";
     let nn = |error| KernelCheckError::Nn { op, case, error };
-    // every 10th row around the NEON and portable kernels' 1024-channel stage, every 7th
-    // more than 256 output channels (never both: the buffers hold one or the other)
-    let (ci, co) = match case {
-        c if c % 10 == 3 => (rng.range(1000, 1100), rng.range(1, 40)),
-        c if c % 7 == 5 => (rng.range(1, 40), rng.range(250, 270)),
-        _ => (rng.range(1, 40), rng.range(1, 40)),
+    // rows around the portable kernel's 1024-channel stage and the NEON kernel's tile sizes
+    // (8 pixels of up to 512 inputs, 4 of 1024, 2 of 2048), every 7th more than 256 output
+    // channels (never both: the buffers hold one or the other)
+    let (ci, co, side) = match case {
+        c if c % 10 == 3 => (rng.range(1000, 1100), rng.range(1, 40), 5),
+        // rows the NEON kernel stages one or two at a time
+        c if c % 10 == 6 => (rng.range(2000, 2100), rng.range(1, 16), 3),
+        c if c % 7 == 5 => (rng.range(1, 40), rng.range(250, 270), 5),
+        _ => (rng.range(1, 40), rng.range(1, 40), 5),
     };
-    let xs = Shape::new(ci, rng.range(1, 5), rng.range(1, 5));
+    let xs = Shape::new(ci, rng.range(1, side), rng.range(1, side));
     let bmax = if case % 10 == 9 { 1 << 30 } else { 20_000 };
     let q = ConvQuant {
         input_zero_point: rng.zp(),

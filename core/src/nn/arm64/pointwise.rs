@@ -4,16 +4,17 @@
 //! [`crate::nn::conv::pack_pointwise`] (per block of 8 output channels, per group of 4 inputs,
 //! 32 bytes: channel-major, 4 inputs each).
 //!
-//! Per tile of up to 4 pixels the input rows are staged once as `i16` (`x − zp`, zero padded
-//! to a multiple of 4). Per block and group, one `ld4` de-interleaves the 32 weight bytes into
-//! the 8 channels' weights of each of the 4 inputs, `sxtl` widens them, and each pixel adds
-//! `w[·][t] · (x[t] − zp)` for its 4 inputs with 8 `smlal` by lane: 128 multiply-adds in 41
-//! instructions for a full tile (the auto-vectorised portable loop needs about twice as many,
-//! widening the weights again for every pixel). The 8 sums start at the biases and are
-//! requantised in registers ([`Rq8Regs`]).
+//! Per tile of up to 8 pixels the input rows are staged once as `i16` (`x − zp`, zero padded
+//! to a multiple of 4; 8 rows of up to 512 inputs, 4 of up to 1024, … 1 of up to 4096). Per
+//! block and group, one `ld4` de-interleaves the 32 weight bytes into the 8 channels' weights
+//! of each of the 4 inputs, `sxtl` widens them, and each pixel adds `w[·][t] · (x[t] − zp)` for
+//! its 4 inputs with 8 `smlal` by lane: 256 multiply-adds in 77 instructions for a full tile
+//! (the auto-vectorised portable loop needs about twice as many per multiply-add, widening the
+//! weights again for every pixel). The 8 sums start at the biases and are requantised in
+//! registers ([`super::lanes::Rq8Regs`]).
 //!
-//! **Stack:** 4 staged rows of up to 1024 `i16` (8 KiB) and the lane-form requantisers of up
-//! to 256 output channels (5 KiB; wider layers make the others per tile).
+//! **Stack:** the 8 KiB stage and the lane-form requantisers of up to 256 output channels
+//! (5 KiB; wider layers make the others per tile).
 
 use core::arch::aarch64::*;
 
@@ -22,10 +23,11 @@ use crate::nn::conv::{ConvQuant, PW_BLOCK, PW_GROUP};
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::Shape;
 
-/// Pixels per tile.
-const TILE: usize = 4;
-/// Longest input row the kernel stages (wider rows: the portable kernel).
-const STAGE: usize = 1024;
+/// Most pixels per tile.
+const TILE: usize = 8;
+/// `i16`s of the stage (8 KiB): [`TILE`] rows of up to 512 inputs, fewer rows of wider ones;
+/// rows wider than this take the portable kernel.
+const STAGE: usize = 4096;
 /// Blocks of 8 output channels whose requantisers are made once per call.
 const BLOCKS: usize = 32;
 
@@ -55,26 +57,36 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let (lo, hi) = clamp_range(q.output_zero_point, q.relu);
     let n = b.len();
     let groups = k.div_ceil(PW_GROUP);
+    // a staged row: the inputs, zero padded to whole groups
+    let kp = groups * PW_GROUP;
     let panel = groups * PW_BLOCK * PW_GROUP;
     let p = xs.h * xs.w;
     let zp = q.input_zero_point as i16;
     let x = &x[..p * k];
     let out = &mut out[..p * n];
-    let mut st = [[0i16; STAGE]; TILE];
+    // pixels per tile: 8, 4, 2 or 1, as many rows as the stage holds
+    let tp = match STAGE / kp {
+        8.. => 8,
+        4..=7 => 4,
+        2 | 3 => 2,
+        _ => 1,
+    };
+    let mut st = [0i16; STAGE];
     // the requantisers of up to 256 output channels in lane form, made once (5 KiB)
     let mut rqs = [Rq8::ZERO; BLOCKS];
     for (r, qq) in rqs.iter_mut().zip(q.requant.chunks(PW_BLOCK)) {
         *r = Rq8::new(qq);
     }
-    for (xt, ot) in x.chunks(TILE * k).zip(out.chunks_mut(TILE * n)) {
+    for (xt, ot) in x.chunks(tp * k).zip(out.chunks_mut(tp * n)) {
         let np = xt.len() / k;
-        for (row, xr) in st.iter_mut().zip(xt.chunks_exact(k)) {
+        for (row, xr) in st.chunks_exact_mut(kp).zip(xt.chunks_exact(k)) {
             for (s, &v) in row[..k].iter_mut().zip(xr) {
                 *s = v as i16 - zp;
             }
             // the packed weights of the padding inputs are 0, but keep the products defined
-            row[k..groups * PW_GROUP].fill(0);
+            row[k..].fill(0);
         }
+        let st = &st[..tp * kp];
         for (blk, wp) in w.chunks_exact(panel).enumerate() {
             let k0 = blk * PW_BLOCK;
             let nb = (n - k0).min(PW_BLOCK);
@@ -85,11 +97,13 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
                 None => Rq8::new(&q.requant[k0..k0 + nb]),
             }
             .regs(q.output_zero_point, lo, hi);
+            // a short last tile takes the next size up within the tile: the extra rows hold
+            // an earlier tile's pixels (or zeros), whose sums are not stored
             let acc = match np {
-                4 => tile::<4>(&st, wp, groups, &bias),
-                3 => pad(tile::<3>(&st, wp, groups, &bias)),
-                2 => pad(tile::<2>(&st, wp, groups, &bias)),
-                _ => pad(tile::<1>(&st, wp, groups, &bias)),
+                5.. => tile::<8>(st, kp, wp, &bias),
+                3 | 4 => pad(tile::<4>(st, kp, wp, &bias)),
+                2 => pad(tile::<2>(st, kp, wp, &bias)),
+                _ => pad(tile::<1>(st, kp, wp, &bias)),
             };
             for (i, a) in acc.iter().take(np).enumerate() {
                 store8(&mut ot[i * n + k0..i * n + k0 + nb], rq.requant(*a));
@@ -106,17 +120,18 @@ fn pad<const P: usize>(a: [[int32x4_t; 2]; P]) -> [[int32x4_t; 2]; TILE] {
     core::array::from_fn(|i| if i < P { a[i] } else { [z; 2] })
 }
 
-/// The 8 channels' sums (biases included) of the first `P` staged rows over one block's panel
-/// (`groups · 32` bytes).
+/// The 8 channels' sums (biases included) of the first `P` staged rows (`kp` `i16`s each,
+/// `P · kp ≤ st.len()`) over one block's panel (`kp · 8` bytes).
 #[target_feature(enable = "neon")]
 #[inline]
 fn tile<const P: usize>(
-    st: &[[i16; STAGE]; TILE],
+    st: &[i16],
+    kp: usize,
     wp: &[i8],
-    groups: usize,
     bias: &[i32; PW_BLOCK],
 ) -> [[int32x4_t; 2]; P] {
-    let wp = &wp[..groups * PW_BLOCK * PW_GROUP];
+    let wp = &wp[..kp * PW_BLOCK];
+    let rows: [&[i16]; P] = core::array::from_fn(|i| &st[i * kp..(i + 1) * kp]);
     // SAFETY: 8 `i32`s.
     let b = unsafe { [vld1q_s32(bias.as_ptr()), vld1q_s32(bias.as_ptr().add(4))] };
     let mut acc = [b; P];
@@ -124,8 +139,8 @@ fn tile<const P: usize>(
         // SAFETY: `wg` is 32 bytes; `.t` = the 8 channels' weights of input `4g + t`.
         let wv = unsafe { vld4_s8(wg.as_ptr()) };
         let (w0, w1, w2, w3) = (vmovl_s8(wv.0), vmovl_s8(wv.1), vmovl_s8(wv.2), vmovl_s8(wv.3));
-        for (a, row) in acc.iter_mut().zip(st) {
-            // inside the stage: `4g + 4 ≤ groups · 4 ≤ STAGE`
+        for (a, row) in acc.iter_mut().zip(&rows) {
+            // inside the row: `4g + 4 ≤ kp`
             let xr = &row[PW_GROUP * g..PW_GROUP * g + PW_GROUP];
             // SAFETY: 4 `i16`s.
             let xv = unsafe { vld1_s16(xr.as_ptr()) };
