@@ -15,7 +15,8 @@
 //! | [`depthwise3x3`]          | `x86::depthwise`                         | `arm64::depthwise`      | `portable::depthwise` |
 //! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `arm64::pointwise`      | `portable::pointwise` |
 //! | [`resize_bilinear`]       | `x86::resize`                            | `arm64::resize`         | `portable::resize`    |
-//! | [`add`], [`concat_input`] | `x86::eltwise`                           | `portable::eltwise`     | `portable::eltwise`   |
+//! | [`add`]                   | `x86::eltwise`                           | `arm64::eltwise`        | `portable::eltwise`   |
+//! | [`concat_input`]          | `x86::eltwise`                           | `portable::eltwise`     | `portable::eltwise`   |
 //! | [`relu`], [`avgpool`]     | —                                        | —                       | `portable::{eltwise, pool}` |
 //!
 //! The level is the CPU's best, capped process-wide by `x86::set_max_isa` (measurements) and,
@@ -169,6 +170,10 @@ pub(crate) fn resize_bilinear(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i
 pub(crate) fn add(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]) {
     #[cfg(target_arch = "x86_64")]
     if level() >= Isa::Avx2 && x86::eltwise::add(a, b, shape, q, out) {
+        return;
+    }
+    #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+    if neon() && arm64::eltwise::add(a, b, shape, q, out) {
         return;
     }
     portable::eltwise::add(a, b, shape, q, out)

@@ -85,8 +85,16 @@ impl Rq8Regs {
     #[target_feature(enable = "neon")]
     #[inline]
     pub(crate) fn requant(&self, acc: [int32x4_t; 2]) -> int8x8_t {
-        let (a, b) = (self.half4(acc[0], 0), self.half4(acc[1], 1));
+        let [a, b] = self.requant_i32(acc);
         vmovn_s16(vcombine_s16(vmovn_s32(a), vmovn_s32(b)))
+    }
+
+    /// `clamp(zp + apply(acc), lo, hi)` of the 8 lanes, not narrowed (with `zp = 0`,
+    /// `lo = i32::MIN`, `hi = i32::MAX`: `apply(acc)` itself, as `Add` needs per input).
+    #[target_feature(enable = "neon")]
+    #[inline]
+    pub(crate) fn requant_i32(&self, acc: [int32x4_t; 2]) -> [int32x4_t; 2] {
+        [self.half4(acc[0], 0), self.half4(acc[1], 1)]
     }
 
     /// Lanes `4j..4j + 4` of [`Rq8Regs::requant`], before narrowing.

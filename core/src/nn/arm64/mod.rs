@@ -1,6 +1,6 @@
 //! # arm64: NEON forms of the int8 kernels (aarch64)
 //!
-//! The kernels an aarch64 ECU runs for the four op families that hold most of the network's
+//! The kernels an aarch64 ECU runs for the five op families that hold most of the network's
 //! work, beside the safe `nn::portable` kernels (which keep the other families):
 //!
 //! | file        | ONNX op                                       | instructions                  | stack   |
@@ -9,6 +9,7 @@
 //! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2       | `ssubl`, `sxtl`, `smlal`      | 5 KiB   |
 //! | `conv1`     | `Conv` 3×3 of a one-channel map (first layer) | `smlal` (lane)                | 2.5 KiB |
 //! | `resize`    | `Resize` bilinear, `half_pixel`               | `ssubl`, `smull`, `mla`       | 1.5 KiB |
+//! | `eltwise`   | `Add`                                         | `sshll`, `sqrdmulh`           | —       |
 //! | `lanes`     | shared: requantisation of 8 lanes             | `sqrdmulh`, `sshl`, `xtn`     | —       |
 //!
 //! NEON (Advanced SIMD) is part of every aarch64 target this crate builds for
@@ -41,6 +42,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 
 pub(crate) mod conv1;
 pub(crate) mod depthwise;
+pub(crate) mod eltwise;
 pub(crate) mod lanes;
 pub(crate) mod pointwise;
 pub(crate) mod resize;
