@@ -3,7 +3,7 @@
 //! A self-test of the op families that have instruction-set kernels, as *this build* runs
 //! them: the NEON kernels on aarch64 (`nn::arm64`), AVX2 / AVX-512 VNNI or the portable ones on
 //! x86-64, the portable ones on Cortex-M. Seeded random 1×1 convs, depthwise 3×3 convs, 3×3
-//! convs of a one-channel map and bilinear resizes whose shapes straddle every kernel's
+//! convs of a one-channel map, bilinear resizes and quantised adds whose shapes straddle every kernel's
 //! blocking — 1×1 rows of 1 to 2100 channels (the stages and tiles), more than 256 output channels (the
 //! requantisers the kernels make once), more than 64 first-layer channels, channel counts that
 //! are not a multiple of 8 (11 classes), 1 to 25 pixels (the 4-pixel tiles), stride 1 and 2 and
@@ -25,6 +25,7 @@ use semloc_core::nn::conv::{
     depthwise3x3_reference, pack_pointwise, pointwise_fast, pointwise_packed_len,
     pointwise_reference, Conv2dParams, ConvQuant,
 };
+use semloc_core::nn::eltwise::{add_fast, add_reference, AddQuant};
 use semloc_core::nn::resize::{resize_bilinear_fast, resize_bilinear_reference, ResizeQuant};
 use semloc_core::nn::{NnError, Requant, Shape};
 
@@ -83,6 +84,8 @@ pub struct KernelCheckReport {
     pub first_conv: u32,
     /// Bilinear resizes.
     pub resize: u32,
+    /// Quantised adds.
+    pub add: u32,
 }
 
 /// Why the check failed.
@@ -90,7 +93,7 @@ pub struct KernelCheckReport {
 pub enum KernelCheckError {
     /// The fast kernel's output differs from the reference's.
     Mismatch {
-        /// `"pointwise"`, `"depthwise"`, `"first conv"` or `"resize"`.
+        /// `"pointwise"`, `"depthwise"`, `"first conv"`, `"resize"` or `"add"`.
         op: &'static str,
         /// The case number (with the seed, it regenerates the case).
         case: u32,
@@ -199,7 +202,40 @@ pub fn run(
     for case in 0..cases {
         resize_case(buf, &mut rng, case)?;
     }
-    Ok(KernelCheckReport { pointwise: cases, depthwise: cases, first_conv: cases, resize: cases })
+    for case in 0..cases {
+        add_case(buf, &mut rng, case)?;
+    }
+    Ok(KernelCheckReport {
+        pointwise: cases,
+        depthwise: cases,
+        first_conv: cases,
+        resize: cases,
+        add: cases,
+    })
+}
+
+fn add_case(
+    buf: &mut KernelCheckBuffers,
+    rng: &mut Rng,
+    case: u32,
+) -> Result<(), KernelCheckError> {
+    let op = "add";
+    let nn = |error| KernelCheckError::Nn { op, case, error };
+    // lengths with every remainder mod 8; every 10th an output scale so fine that the output
+    // requantiser shifts left (the vector form does not hold: the portable fallback)
+    let s = Shape::new(rng.range(1, 150), rng.range(1, 12), rng.range(1, 13));
+    let scale = |rng: &mut Rng| 0.002 + (rng.next() % 1000) as f64 / 10_000.0;
+    let (s1, s2) = (scale(rng), scale(rng));
+    let fine = if case % 10 == 9 { 1e-8 } else { 1.0 };
+    let s_out = (s1 + s2) * (0.5 + (rng.next() % 1000) as f64 / 1000.0) * fine;
+    let q = AddQuant::new(s1, rng.zp(), s2, rng.zp(), s_out, rng.zp(), rng.coin());
+    let n = s.len();
+    rng.i8s(&mut buf.x[..n]);
+    rng.i8s(&mut buf.w[..n]);
+    let (a, b) = (&buf.x[..n], &buf.w[..n]);
+    add_reference(a, b, s, &q, &mut buf.reference[..n]).map_err(nn)?;
+    add_fast(a, b, s, &q, &mut buf.fast[..n]).map_err(nn)?;
+    compare(buf, n, op, case, s)
 }
 
 /// `Err(Mismatch)` at the first byte where the fast output (`buf.fast[..n]`) differs.

@@ -234,8 +234,13 @@ fn kernel_check_passes_on_this_build() {
     let mut buf = Box::new(KernelCheckBuffers::new());
     for seed in [0x5e10_c0de, 7] {
         let r = run(&mut buf, seed, 500).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
-        let want =
-            KernelCheckReport { pointwise: 500, depthwise: 500, first_conv: 500, resize: 500 };
+        let want = KernelCheckReport {
+            pointwise: 500,
+            depthwise: 500,
+            first_conv: 500,
+            resize: 500,
+            add: 500,
+        };
         assert_eq!(r, want);
     }
 }

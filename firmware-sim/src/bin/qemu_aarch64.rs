@@ -325,12 +325,13 @@ mod fw {
             Ok(r) => {
                 let _ = writeln!(
                     con,
-                    "@ kernels: {} 1x1, {} depthwise, {} first-layer convs and {} resizes \
-                     bit-equal to the reference, {:.1} ms",
+                    "@ kernels: {} 1x1, {} depthwise, {} first-layer convs, {} resizes and {} \
+                     adds bit-equal to the reference, {:.1} ms",
                     r.pointwise,
                     r.depthwise,
                     r.first_conv,
                     r.resize,
+                    r.add,
                     ms_since(t0)
                 );
             }
