@@ -67,6 +67,25 @@ impl KernelCheckBuffers {
     }
 }
 
+impl KernelCheckBuffers {
+    /// A conv case's operands: random `x[..xn]`, weights `w[..wn]` and `c` biases (up to
+    /// `±bmax`) and requantisers; returns the input and output zero points and the fused ReLU.
+    fn fill(
+        &mut self,
+        rng: &mut Rng,
+        xn: usize,
+        wn: usize,
+        c: usize,
+        bmax: i32,
+    ) -> (i32, i32, bool) {
+        let q = (rng.zp(), rng.zp(), rng.coin());
+        rng.i8s(&mut self.x[..xn]);
+        rng.i8s(&mut self.w[..wn]);
+        rng.quant(c, bmax, &mut self.bias, &mut self.requant);
+        q
+    }
+}
+
 impl Default for KernelCheckBuffers {
     fn default() -> Self {
         Self::new()
@@ -274,16 +293,13 @@ fn first_conv_case(
         }
     };
     let bmax = if case % 10 == 9 { 1 << 30 } else { 100_000 };
+    let (zi, zo, relu) = buf.fill(rng, xs.len(), 9 * co, co, bmax);
     let q = ConvQuant {
-        input_zero_point: rng.zp(),
-        output_zero_point: rng.zp(),
-        requant: &[],
-        relu: rng.coin(),
+        input_zero_point: zi,
+        output_zero_point: zo,
+        requant: &buf.requant[..co],
+        relu,
     };
-    rng.i8s(&mut buf.x[..xs.len()]);
-    rng.i8s(&mut buf.w[..9 * co]);
-    rng.quant(co, bmax, &mut buf.bias, &mut buf.requant);
-    let q = ConvQuant { requant: &buf.requant[..co], ..q };
     let n = os.len();
     let (x, w, b) = (&buf.x[..xs.len()], &buf.w[..9 * co], &buf.bias[..co]);
     conv2d_reference(x, xs, &p, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
@@ -338,18 +354,15 @@ fn pointwise_case(
     };
     let xs = Shape::new(ci, rng.range(1, side), rng.range(1, side));
     let bmax = if case % 10 == 9 { 1 << 30 } else { 20_000 };
-    let q = ConvQuant {
-        input_zero_point: rng.zp(),
-        output_zero_point: rng.zp(),
-        requant: &[],
-        relu: rng.coin(),
-    };
-    rng.i8s(&mut buf.x[..xs.len()]);
-    rng.i8s(&mut buf.w[..co * ci]);
-    rng.quant(co, bmax, &mut buf.bias, &mut buf.requant);
+    let (zi, zo, relu) = buf.fill(rng, xs.len(), co * ci, co, bmax);
     let plen = pointwise_packed_len(co, ci);
     pack_pointwise(&buf.w[..co * ci], co, ci, &mut buf.packed[..plen]).map_err(nn)?;
-    let q = ConvQuant { requant: &buf.requant[..co], ..q };
+    let q = ConvQuant {
+        input_zero_point: zi,
+        output_zero_point: zo,
+        requant: &buf.requant[..co],
+        relu,
+    };
     let n = xs.h * xs.w * co;
     let (x, w, b) = (&buf.x[..xs.len()], &buf.packed[..plen], &buf.bias[..co]);
     pointwise_reference(x, xs, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;
@@ -373,16 +386,9 @@ fn depthwise_case(
     let xs = Shape::new(c, rng.range(1, 9), rng.range(1, 9));
     let stride = rng.range(1, 2);
     let bmax = if case % 10 == 9 { 1 << 30 } else { 5000 };
-    let q = ConvQuant {
-        input_zero_point: rng.zp(),
-        output_zero_point: rng.zp(),
-        requant: &[],
-        relu: rng.coin(),
-    };
-    rng.i8s(&mut buf.x[..xs.len()]);
-    rng.i8s(&mut buf.w[..9 * c]);
-    rng.quant(c, bmax, &mut buf.bias, &mut buf.requant);
-    let q = ConvQuant { requant: &buf.requant[..c], ..q };
+    let (zi, zo, relu) = buf.fill(rng, xs.len(), 9 * c, c, bmax);
+    let q =
+        ConvQuant { input_zero_point: zi, output_zero_point: zo, requant: &buf.requant[..c], relu };
     let n = depthwise3x3_output_shape(xs, stride).map_err(nn)?.len();
     let (x, w, b) = (&buf.x[..xs.len()], &buf.w[..9 * c], &buf.bias[..c]);
     depthwise3x3_reference(x, xs, stride, w, b, &q, &mut buf.reference[..n]).map_err(nn)?;

@@ -16,7 +16,7 @@
 
 use core::arch::aarch64::*;
 
-use super::lanes::{store8, Rq8};
+use super::lanes::{load8, store8, Rq8};
 use crate::nn::conv::ConvQuant;
 use crate::nn::portable::conv::tap_range;
 use crate::nn::quant::{clamp_range, fits_simd_requant};
@@ -24,21 +24,6 @@ use crate::nn::Shape;
 
 /// Groups of 8 channels whose requantisers are made once per call.
 const GROUPS: usize = 32;
-
-/// Up to 8 bytes as a vector, the missing lanes `pad`.
-#[target_feature(enable = "neon")]
-#[inline]
-fn load8(v: &[i8], pad: i8) -> int8x8_t {
-    match <&[i8; 8]>::try_from(v) {
-        // SAFETY: 8 bytes.
-        Ok(a) => unsafe { vld1_s8(a.as_ptr()) },
-        Err(_) => {
-            let t: [i8; 8] = core::array::from_fn(|i| v.get(i).copied().unwrap_or(pad));
-            // SAFETY: 8 bytes of `t`.
-            unsafe { vld1_s8(t.as_ptr()) }
-        }
-    }
-}
 
 /// The depthwise 3×3 conv on operands [`crate::nn::conv::depthwise3x3_fast`] has checked (`os`
 /// the output shape); `false` (nothing written) when the vector requantisation does not hold.

@@ -10,7 +10,7 @@
 
 use core::arch::aarch64::*;
 
-use super::lanes::{store8, Rq8};
+use super::lanes::{load8, store8, Rq8};
 use crate::nn::eltwise::AddQuant;
 use crate::nn::quant::{clamp_range, Lane1, ADD_LEFT_SHIFT};
 use crate::nn::Shape;
@@ -69,11 +69,6 @@ fn run(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]) {
     }
     let (ar, br, or) = (ac.remainder(), bc.remainder(), oc.into_remainder());
     if !or.is_empty() {
-        let pad = |r: &[i8]| {
-            let t: [i8; 8] = core::array::from_fn(|i| r.get(i).copied().unwrap_or(0));
-            // SAFETY: 8 bytes of `t`.
-            unsafe { vld1_s8(t.as_ptr()) }
-        };
-        store8(or, add8(pad(ar), pad(br)));
+        store8(or, add8(load8(ar, 0), load8(br, 0)));
     }
 }

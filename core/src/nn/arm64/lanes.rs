@@ -128,3 +128,18 @@ pub(crate) fn store8(out: &mut [i8], v: int8x8_t) {
         }
     }
 }
+
+/// Up to 8 bytes as a vector, the missing lanes `pad`.
+#[target_feature(enable = "neon")]
+#[inline]
+pub(crate) fn load8(v: &[i8], pad: i8) -> int8x8_t {
+    match <&[i8; 8]>::try_from(v) {
+        // SAFETY: 8 bytes.
+        Ok(a) => unsafe { vld1_s8(a.as_ptr()) },
+        Err(_) => {
+            let t: [i8; 8] = core::array::from_fn(|i| v.get(i).copied().unwrap_or(pad));
+            // SAFETY: 8 bytes of `t`.
+            unsafe { vld1_s8(t.as_ptr()) }
+        }
+    }
+}

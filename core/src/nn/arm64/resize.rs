@@ -18,7 +18,7 @@
 
 use core::arch::aarch64::*;
 
-use super::lanes::{store8, Rq8};
+use super::lanes::{load8, store8, Rq8};
 use crate::nn::quant::Lane1;
 use crate::nn::resize::{half_pixel_taps, ResizeQuant, RESIZE_FRAC_BITS};
 use crate::nn::Shape;
@@ -42,21 +42,6 @@ pub(crate) fn resize_bilinear(
     // SAFETY: this module is compiled only where `neon` is a target feature of the build.
     unsafe { run(x, xs, q, out, os) };
     true
-}
-
-/// Up to 8 bytes as a vector, the missing lanes `pad`.
-#[target_feature(enable = "neon")]
-#[inline]
-fn load8(v: &[i8], pad: i8) -> int8x8_t {
-    match <&[i8; 8]>::try_from(v) {
-        // SAFETY: 8 bytes.
-        Ok(a) => unsafe { vld1_s8(a.as_ptr()) },
-        Err(_) => {
-            let t: [i8; 8] = core::array::from_fn(|i| v.get(i).copied().unwrap_or(pad));
-            // SAFETY: 8 bytes of `t`.
-            unsafe { vld1_s8(t.as_ptr()) }
-        }
-    }
 }
 
 /// [`resize_bilinear`] after its check.
