@@ -363,7 +363,7 @@ pub fn pointwise_reference(
 /// `i32` accumulation over the packed weights, the same integers as [`pointwise_reference`],
 /// from the kernel `nn::dispatch` picks — on x86-64 with AVX2 `nn::x86::pointwise`'s
 /// register-tiled GEMM (AVX-512 VNNI where the CPU has it) with vectorised requantisation,
-/// on aarch64 `nn::arm64::pointwise` (NEON, 4-pixel tiles), else `nn::portable::pointwise`.
+/// on aarch64 `nn::arm64::pointwise` (NEON, 8-pixel tiles), else `nn::portable::pointwise`.
 pub fn pointwise_fast(
     x: &[i8],
     xs: Shape,

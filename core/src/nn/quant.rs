@@ -188,12 +188,9 @@ impl Lanes8 {
     pub(crate) fn new(r: &[Requant]) -> Self {
         let mut l = Lanes8 { m: [0; 8], left: [0; 8], right: [0; 8], mask: [0; 8], half: [0; 8] };
         for (i, q) in r.iter().take(8).enumerate() {
-            let e = (-q.shift).clamp(0, 31) as u32;
-            l.m[i] = q.multiplier as i64;
-            l.left[i] = q.shift.clamp(0, 30) as u32;
-            l.right[i] = e;
-            l.mask[i] = ((1i64 << e) - 1) as i32;
-            l.half[i] = l.mask[i] >> 1;
+            let q = Lane1::new(*q);
+            (l.m[i], l.left[i], l.right[i], l.mask[i], l.half[i]) =
+                (q.m, q.left, q.right, q.mask, q.half);
         }
         l
     }
@@ -239,13 +236,20 @@ fn requant_lane(
 /// [`Requant::to_i8`] for `|x| · 2^left ≤ 2^30`, see [`Lane1::fits`]), for the portable kernels
 /// that requantise whole slices with one requantiser (`Add`, `Resize`): there the loop over
 /// the slice auto-vectorises, where `to_i8`'s saturating steps and `i64` division do not.
+///
+/// Its fields are the lane form every vector kernel loads (`Lanes8`, `nn::arm64`'s `Rq8`).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Lane1 {
-    m: i64,
-    left: u32,
-    right: u32,
-    mask: i32,
-    half: i32,
+    /// The multiplier `M`.
+    pub(crate) m: i64,
+    /// The left shift `max(shift, 0)`.
+    pub(crate) left: u32,
+    /// The rounding right shift `e = max(−shift, 0)`.
+    pub(crate) right: u32,
+    /// `2^e − 1`.
+    pub(crate) mask: i32,
+    /// `mask >> 1`.
+    pub(crate) half: i32,
 }
 
 impl Lane1 {

@@ -13,7 +13,7 @@
 
 use core::arch::aarch64::*;
 
-use crate::nn::quant::Requant;
+use crate::nn::quant::{Lane1, Requant};
 
 /// Up to 8 requantisers in NEON lane form (missing lanes: zero multiplier, output `zp`).
 #[derive(Clone, Copy, Debug)]
@@ -48,12 +48,10 @@ impl Rq8 {
     pub(crate) fn new(r: &[Requant]) -> Self {
         let mut l = Rq8::ZERO;
         for (i, q) in r.iter().take(8).enumerate() {
-            let e = (-q.shift).clamp(0, 31);
-            l.m[i] = q.multiplier;
-            l.left[i] = q.shift.clamp(0, 30);
-            l.right[i] = -e;
-            l.mask[i] = ((1i64 << e) - 1) as i32;
-            l.half[i] = l.mask[i] >> 1;
+            let q = Lane1::new(*q);
+            // M < 2^31 and the shifts ≤ 31 fit the `i32` lanes
+            (l.m[i], l.left[i], l.right[i], l.mask[i], l.half[i]) =
+                (q.m as i32, q.left as i32, -(q.right as i32), q.mask, q.half);
         }
         l
     }

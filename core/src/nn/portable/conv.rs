@@ -10,6 +10,7 @@
 //! **ISA:** any (auto-vectorised where the target has SIMD). **Stack:** 5.8 KiB (the first
 //! form: transposed `i16` weights, lane-form requantisers, a channel accumulator), else none.
 
+use super::requant_channels;
 use crate::nn::conv::{Conv2dParams, ConvQuant};
 use crate::nn::quant::{clamp_range, fits_simd_requant, Lanes8};
 use crate::nn::Shape;
@@ -134,23 +135,8 @@ fn conv2d_taps(
                     }
                 }
             }
-            if vector {
-                for ((o, a), (l, bb)) in
-                    opix.chunks_mut(8).zip(acc.chunks(8)).zip(l8.iter().zip(b.chunks(8)))
-                {
-                    let v: [i32; 8] = core::array::from_fn(|t| {
-                        a.get(t).copied().unwrap_or(0) + bb.get(t).copied().unwrap_or(0)
-                    });
-                    let r = l.requant(&v, q.output_zero_point, lo, hi);
-                    o.copy_from_slice(&r[..o.len()]);
-                }
-            } else {
-                for ((o, &a), (&bias, rq)) in
-                    opix.iter_mut().zip(acc.iter()).zip(b.iter().zip(q.requant))
-                {
-                    *o = rq.to_i8(a.saturating_add(bias), q.output_zero_point, lo, hi);
-                }
-            }
+            let l8 = vector.then_some(&l8[..]);
+            requant_channels(opix, acc, b, q.requant, l8, q.output_zero_point, lo, hi);
         }
     }
 }

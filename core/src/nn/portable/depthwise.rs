@@ -10,6 +10,7 @@
 //! accumulator block and the lane-form requantisers of up to 256 channels (6.3 KiB).
 
 use super::conv::tap_range;
+use super::requant_channels;
 use crate::nn::conv::ConvQuant;
 use crate::nn::quant::{clamp_range, fits_simd_requant, Lanes8};
 use crate::nn::Shape;
@@ -68,27 +69,9 @@ pub(crate) fn depthwise3x3(
                         }
                     }
                 }
-                if let Some(l8) = &lanes {
-                    // 8 channels at a time, branch-free (the biases cannot saturate here)
-                    for (j, (o, a)) in opix[c0..c0 + n].chunks_mut(8).zip(acc.chunks(8)).enumerate()
-                    {
-                        let ch = c0 + 8 * j;
-                        let v: [i32; 8] = core::array::from_fn(|t| {
-                            a.get(t).copied().unwrap_or(0) + b.get(ch + t).copied().unwrap_or(0)
-                        });
-                        let r = l8[ch / 8].requant(&v, q.output_zero_point, lo, hi);
-                        o.copy_from_slice(&r[..o.len()]);
-                    }
-                } else {
-                    for (((o, &a), &bias), rq) in opix[c0..c0 + n]
-                        .iter_mut()
-                        .zip(acc.iter())
-                        .zip(&b[c0..c0 + n])
-                        .zip(&q.requant[c0..c0 + n])
-                    {
-                        *o = rq.to_i8(a.saturating_add(bias), q.output_zero_point, lo, hi);
-                    }
-                }
+                let l8 = lanes.map(|l| &l[c0 / 8..]);
+                let (zo, rq) = (q.output_zero_point, &q.requant[c0..c0 + n]);
+                requant_channels(&mut opix[c0..c0 + n], acc, &b[c0..c0 + n], rq, l8, zo, lo, hi);
                 c0 += n;
             }
         }

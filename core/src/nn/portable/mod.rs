@@ -24,3 +24,41 @@ pub(crate) mod eltwise;
 pub(crate) mod pointwise;
 pub(crate) mod pool;
 pub(crate) mod resize;
+
+use crate::nn::quant::{Lanes8, Requant};
+
+/// Requantises one pixel's channel sums `acc` plus `bias` into `out` (all slices from the same
+/// channel, as long as `out`): 8 channels at a time through `lanes`, the lane forms of
+/// `requant` (branch-free; only where [`crate::nn::quant::fits_simd_requant`] holds, so the
+/// bias cannot saturate), else channel by channel ([`Requant::to_i8`]).
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn requant_channels(
+    out: &mut [i8],
+    acc: &[i32],
+    bias: &[i32],
+    requant: &[Requant],
+    lanes: Option<&[Lanes8]>,
+    zo: i32,
+    lo: i32,
+    hi: i32,
+) {
+    match lanes {
+        Some(l8) => {
+            for (((o, a), bb), l) in
+                out.chunks_mut(8).zip(acc.chunks(8)).zip(bias.chunks(8)).zip(l8)
+            {
+                let v: [i32; 8] = core::array::from_fn(|t| {
+                    a.get(t).copied().unwrap_or(0) + bb.get(t).copied().unwrap_or(0)
+                });
+                let r = l.requant(&v, zo, lo, hi);
+                o.copy_from_slice(&r[..o.len()]);
+            }
+        }
+        None => {
+            for (((o, &a), &b), rq) in out.iter_mut().zip(acc).zip(bias).zip(requant) {
+                *o = rq.to_i8(a.saturating_add(b), zo, lo, hi);
+            }
+        }
+    }
+}
