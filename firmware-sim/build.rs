@@ -107,20 +107,10 @@ fn embed(data: &Path, out: &Path) {
         for side in ["left", "right"] {
             let png = data.join(format!("{side}_{i:02}.png"));
             println!("cargo:rerun-if-changed={}", png.display());
-            let img = image::open(&png)
-                .unwrap_or_else(|e| fail(format!("{}: {e}", png.display())))
-                .into_luma8();
-            if (img.width() as usize, img.height() as usize) != (w, h) {
-                fail(format!(
-                    "{}: {}x{}, manifest says {w}x{h}",
-                    png.display(),
-                    img.width(),
-                    img.height()
-                ));
-            }
+            let luma = decode_grey_png(&png, w, h)
+                .unwrap_or_else(|e| fail(format!("{}: {e}", png.display())));
             let raw = out.join(format!("{side}_{i:02}.luma"));
-            std::fs::write(&raw, img.as_raw())
-                .unwrap_or_else(|e| fail(format!("{}: {e}", raw.display())));
+            std::fs::write(&raw, &luma).unwrap_or_else(|e| fail(format!("{}: {e}", raw.display())));
             paths.push(raw);
         }
         let pose: Vec<String> = pose.iter().map(|x| format!("{x:?}")).collect();
@@ -149,4 +139,29 @@ fn embed(data: &Path, out: &Path) {
     );
     let path = out.join("embedded_data.rs");
     std::fs::write(&path, rs).unwrap_or_else(|e| fail(format!("{}: {e}", path.display())));
+}
+
+/// Decodes an 8-bit grey PNG of `w`×`h` pixels (what `examples/make_frames.rs` writes) to its
+/// row-major bytes. The `png` crate alone: `image` as a build dependency was built in full by
+/// every `cargo clippy` and bare-metal build (it and its colour-management crates, ~70 s).
+fn decode_grey_png(path: &Path, w: usize, h: usize) -> Result<Vec<u8>, String> {
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let mut dec = png::Decoder::new(std::io::BufReader::new(file));
+    dec.set_transformations(png::Transformations::IDENTITY);
+    let mut reader = dec.read_info().map_err(|e| e.to_string())?;
+    let (cw, cd) = reader.output_color_type();
+    if (cw, cd) != (png::ColorType::Grayscale, png::BitDepth::Eight) {
+        return Err(format!("{cw:?} {cd:?}, want 8-bit grey"));
+    }
+    let info = reader.info();
+    if (info.width as usize, info.height as usize) != (w, h) {
+        return Err(format!("{}x{}, manifest says {w}x{h}", info.width, info.height));
+    }
+    let mut buf = vec![0u8; reader.output_buffer_size().ok_or("image too large")?];
+    let frame = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
+    buf.truncate(frame.buffer_size());
+    if buf.len() != w * h {
+        return Err(format!("{} bytes decoded, want {}", buf.len(), w * h));
+    }
+    Ok(buf)
 }
