@@ -24,25 +24,30 @@ fn main() {
         None => "unknown".to_string(),
     };
     println!("cargo:rustc-env=SEMLOC_GIT_HASH={value}");
-    // Re-run when HEAD moves or the index changes (a commit, a checkout, `git add`).
-    let mut watched = false;
-    for rel in ["HEAD", "index"] {
-        if let Some(p) = git(&["rev-parse", "--git-path", rel]) {
-            let p = std::path::Path::new(&p);
-            if p.exists() {
-                println!("cargo:rerun-if-changed={}", p.display());
-                watched = true;
+    // Re-run when HEAD moves (a commit, a checkout: HEAD, the branch's ref, packed-refs) or
+    // the code built into this crate changes (the `-dirty` flag: this package, core, the
+    // workspace manifest and lock file). Not on `.git/index`: `git status` above rewrites it
+    // when it refreshes stat data (right after a clone it always does), so watching it re-ran
+    // this script, and rebuilt this crate and all that depends on it, in the build after.
+    let mut watched = Vec::new();
+    let head_ref = git(&["symbolic-ref", "-q", "HEAD"]);
+    for rel in ["HEAD", "packed-refs"].into_iter().map(String::from).chain(head_ref) {
+        if let Some(p) = git(&["rev-parse", "--git-path", &rel]) {
+            if std::path::Path::new(&p).exists() {
+                watched.push(p);
             }
         }
     }
-    if let Some(r) = git(&["symbolic-ref", "-q", "HEAD"]) {
-        if let Some(p) = git(&["rev-parse", "--git-path", &r]) {
-            if std::path::Path::new(&p).exists() {
+    if watched.is_empty() {
+        println!("cargo:rerun-if-changed=build.rs");
+    } else {
+        for p in watched.iter().map(String::as_str).chain(["src", "build.rs", "Cargo.toml"]) {
+            println!("cargo:rerun-if-changed={p}");
+        }
+        for p in ["../core/src", "../core/Cargo.toml", "../Cargo.toml", "../Cargo.lock"] {
+            if std::path::Path::new(p).exists() {
                 println!("cargo:rerun-if-changed={p}");
             }
         }
-    }
-    if !watched {
-        println!("cargo:rerun-if-changed=build.rs");
     }
 }
