@@ -85,6 +85,7 @@ fn data() -> Option<PathBuf> {
 }
 
 /// int8 core and float tract on a list of (luma image, optional labels).
+#[derive(Default)]
 struct Compared {
     int8: Confusion,
     f32: Confusion,
@@ -92,21 +93,59 @@ struct Compared {
     pixels: u64,
 }
 
+impl Compared {
+    /// Adds another part's counts (integer sums: the same totals in any order).
+    fn merge(&mut self, o: &Compared) {
+        for (a, b) in [(&mut self.int8, &o.int8), (&mut self.f32, &o.f32)] {
+            for (ra, rb) in a.m.iter_mut().zip(&b.m) {
+                ra.iter_mut().zip(rb).for_each(|(x, y)| *x += y);
+            }
+        }
+        self.agree += o.agree;
+        self.pixels += o.pixels;
+    }
+}
+
+/// [`compare_part`] over the images split between threads (up to 4, as many as the machine
+/// has): tract, unoptimised in test builds, takes ~1 s a CamVid frame, and this test was the
+/// longest of the real-data step by far. One int8 model and one tract plan serve every thread.
 fn compare(stem: &str, images: &[PathBuf], annot: Option<&Path>) -> Compared {
     let blob = SlmBlob::load(&artefact(&format!("{stem}.slm"))).unwrap();
     let m = blob.model().unwrap();
     let tract = TractRef::load(&artefact(&format!("{stem}.onnx"))).unwrap();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).clamp(1, 4);
+    let chunk = images.len().div_ceil(threads).max(1);
+    let parts: Vec<Compared> = std::thread::scope(|s| {
+        let handles: Vec<_> = images
+            .chunks(chunk)
+            .map(|part| {
+                let (m, tract) = (&m, &tract);
+                s.spawn(move || compare_part(m, tract, part, annot))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let mut c = Compared::default();
+    parts.iter().for_each(|p| c.merge(p));
+    c
+}
+
+fn compare_part(
+    m: &semloc_core::nn::model::Model<'_>,
+    tract: &TractRef,
+    images: &[PathBuf],
+    annot: Option<&Path>,
+) -> Compared {
     let (mh, mw) = m.input_size();
     let mut arena = vec![0i8; m.arena_len()];
     let (mut input, mut li, mut lf) = (vec![0u8; mh * mw], vec![0u8; mh * mw], vec![0u8; mh * mw]);
-    let mut c =
-        Compared { int8: Confusion::default(), f32: Confusion::default(), agree: 0, pixels: 0 };
+    let mut c = Compared::default();
     for p in images {
         let img = semloc::dataset::luma::load_luma_file(p).unwrap();
         let (w, h) = (img.width() as usize, img.height() as usize);
         let lb = Letterbox::fit(w, h, mh, mw).unwrap();
         prepare_input(img.as_raw(), &lb, &mut input).unwrap();
-        let logits = run(&m, &input, &mut arena, Kernels::Fast).unwrap();
+        let logits = run(m, &input, &mut arena, Kernels::Fast).unwrap();
         argmax(logits, m.output_shape(), &mut li).unwrap();
         tract.run(&input).unwrap().argmax(&mut lf);
         // compare on the frame's own pixels (not the padding)
