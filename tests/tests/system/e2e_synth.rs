@@ -69,10 +69,10 @@ fn shared(dynamics: Dynamics) -> &'static SharedDrive {
         .entry(key.clone())
         .or_insert_with(|| Box::leak(Box::new(OnceLock::new())));
     // Outside the map's lock: other drives generate meanwhile; a second user of this one waits.
-    cell.get_or_init(|| {
-        let dir = shared_root().join(key);
-        let _ = std::fs::remove_dir_all(&dir);
-        SharedDrive { seq: generated_street(&dir, dynamics, 1), backbone: OnceLock::new() }
+    // `shared_root` is this process's own fresh folder, so the drive's folder cannot exist yet.
+    cell.get_or_init(|| SharedDrive {
+        seq: generated_street(&shared_root().join(key), dynamics, 1),
+        backbone: OnceLock::new(),
     })
 }
 
