@@ -15,7 +15,8 @@
 //! `SEMLOC_NN_REPS=n` sets the repetitions of the table (default 5), `SEMLOC_NN_KINDS=pw,dw`
 //! limits it to some kinds, and `SEMLOC_NN_ISA=portable|avx2` caps the x86 fast kernels at the
 //! portable (safe, auto-vectorised) or the AVX2 ones (to compare them on a VNNI machine;
-//! `portable` also turns the aarch64 NEON kernels off); `SEMLOC_NN_SEQ_ONLY=1` runs each op
+//! `portable` also turns the aarch64 NEON kernels off, `neon` only the aarch64 `sdot` GEMM of CPUs
+//! with the dot products); `SEMLOC_NN_SEQ_ONLY=1` runs each op
 //! once and repeats only the per-kind frames (instruction counts under `qemu-aarch64`: the
 //! difference between two repetition counts is whole frames); `SEMLOC_NN_NOREF=1` skips timing the reference
 //! kernels (for `perf stat` of the fast ones).
@@ -547,9 +548,11 @@ fn kernels(c: &mut Criterion) {
     }
     #[cfg(target_arch = "aarch64")]
     {
-        use semloc_core::nn::arm64::{neon_enabled, set_neon};
-        set_neon(std::env::var("SEMLOC_NN_ISA").as_deref() != Ok("portable"));
-        println!("aarch64 NEON kernels: {}", neon_enabled());
+        use semloc_core::nn::arm64::{dotprod_enabled, neon_enabled, set_dotprod, set_neon};
+        let isa = std::env::var("SEMLOC_NN_ISA");
+        set_neon(isa.as_deref() != Ok("portable"));
+        set_dotprod(isa.as_deref() != Ok("neon"));
+        println!("aarch64 NEON kernels: {}, sdot GEMM: {}", neon_enabled(), dotprod_enabled());
     }
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let mut ops = build(&mut rng);

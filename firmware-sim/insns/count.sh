@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Guest instructions of one frame of the int8 network on aarch64, per op kind and whole, with
-# the NEON kernels and with the portable ones: `benches/nn.rs` cross-built for
+# the portable kernels, the NEON ones and NEON with the `sdot` 1×1 GEMM: `benches/nn.rs` cross-built for
 # aarch64-unknown-linux-gnu and run under qemu-aarch64 with a counting plugin (insn.c).
 # QEMU's timings mean nothing, and instructions are not cycles; with no Arm board here this is
 # the measure the kernels' changes were judged by (README, "The int8 network on aarch64").
@@ -29,11 +29,17 @@ frame() {
   a=$(count none 1 SEMLOC_SLM="$MODEL" "$@"); b=$(count none 3 SEMLOC_SLM="$MODEL" "$@")
   echo $(( (b - a) / 4 ))
 }
-printf '%-12s %14s %14s %7s\n' kind portable neon ratio
+# three levels: the portable kernels, baseline NEON, NEON with the `sdot` 1×1 GEMM (qemu-aarch64's
+# default CPU, `max`, has the dot products; ratios against portable and against NEON)
+printf '%-12s %14s %14s %14s %9s %9s\n' kind portable neon dotprod "p/neon" "neon/dot"
+row() {
+  printf '%-12s %14d %14d %14d %9.2f %9.2f\n' "$1" "$2" "$3" "$4" \
+    "$(awk -v p="$2" -v n="$3" 'BEGIN { print p / n }')" "$(awk -v n="$3" -v d="$4" 'BEGIN { print n / d }')"
+}
 for k in pw dw conv Resize Concat Add AveragePool; do
   p=$(( ($(count $k 3 SEMLOC_NN_ISA=portable) - $(count $k 1 SEMLOC_NN_ISA=portable)) / 2 ))
-  n=$(( ($(count $k 3) - $(count $k 1)) / 2 ))
-  printf '%-12s %14d %14d %7.2f\n' "$k" "$p" "$n" "$(awk -v p="$p" -v n="$n" 'BEGIN { print p / n }')"
+  n=$(( ($(count $k 3 SEMLOC_NN_ISA=neon) - $(count $k 1 SEMLOC_NN_ISA=neon)) / 2 ))
+  d=$(( ($(count $k 3) - $(count $k 1)) / 2 ))
+  row "$k" "$p" "$n" "$d"
 done
-p=$(frame SEMLOC_NN_ISA=portable); n=$(frame SEMLOC_NN_ISA=neon)
-printf '%-12s %14d %14d %7.2f\n' "graph" "$p" "$n" "$(awk -v p="$p" -v n="$n" 'BEGIN { print p / n }')"
+row graph "$(frame SEMLOC_NN_ISA=portable)" "$(frame SEMLOC_NN_ISA=neon)" "$(frame)"

@@ -7,13 +7,14 @@
 //! included) has the `x86` kernels, and `level` is the CPU's best as `x86::isa` probes it
 //! (`cpuid`/`xgetbv`: AVX2, AVX-512 VNNI), `Portable` on a CPU without AVX2 — the x86 entries
 //! also refuse (return `false`) there, so no AVX2 instruction runs on such a CPU. Another
-//! run-time check (NEON dot products on aarch64, …) belongs in `level` and the arms below.
+//! On aarch64 the 1×1 GEMM takes the dot products (`sdot`) where `arm64::dotprod_enabled`
+//! finds them at run time, the other families the baseline NEON kernels.
 //!
 //! | family                    | x86-64, CPU with AVX2                    | aarch64 (NEON)          | elsewhere             |
 //! |---------------------------|------------------------------------------|-------------------------|-----------------------|
 //! | [`conv2d`]                | `x86::conv1` (3×3, one input channel)    | `arm64::conv1` (same)   | `portable::conv`      |
 //! | [`depthwise3x3`]          | `x86::depthwise`                         | `arm64::depthwise`      | `portable::depthwise` |
-//! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `arm64::pointwise`      | `portable::pointwise` |
+//! | [`pointwise`]             | `x86::pointwise` (AVX-512 VNNI or AVX2)  | `arm64::dot` (`sdot`) or `arm64::pointwise` | `portable::pointwise` |
 //! | [`resize_bilinear`]       | `x86::resize`                            | `arm64::resize`         | `portable::resize`    |
 //! | [`add`]                   | `x86::eltwise`                           | `arm64::eltwise`        | `portable::eltwise`   |
 //! | [`concat_input`]          | `x86::eltwise`                           | `portable::eltwise`     | `portable::eltwise`   |
@@ -22,8 +23,9 @@
 //! The level is the CPU's best, capped process-wide by `x86::set_max_isa` (measurements) and,
 //! in tests, per thread by [`for_each_level`], which runs a closure once per level this CPU
 //! has (the shared `kernel_equivalence!` tests use it). On aarch64 there is no run-time probe
-//! (NEON is part of the target): `arm64::set_neon` turns the NEON kernels off process-wide and
-//! [`for_each_level`] runs `neon`, then `portable`. **Memory:** none of its own.
+//! for NEON (part of the target), one for the dot products: `arm64::set_neon` turns the NEON
+//! kernels off process-wide, `arm64::set_dotprod` the `sdot` GEMM, and [`for_each_level`] runs
+//! `dotprod` (where the CPU has it), `neon`, then `portable`. **Memory:** none of its own.
 
 #[cfg(all(test, any(target_arch = "x86_64", target_arch = "aarch64")))]
 use core::cell::Cell;
@@ -70,17 +72,39 @@ pub(crate) fn level() -> Isa {
 #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
 #[inline]
 fn neon() -> bool {
-    #[cfg(test)]
-    let cap = NEON_CAP.with(Cell::get);
-    #[cfg(not(test))]
-    let cap = true;
-    cap && arm64::neon_enabled()
+    arm_cap() >= ARM_NEON && arm64::neon_enabled()
+}
+
+/// Whether the `sdot` 1×1 GEMM may run on this call: the CPU has the dot products
+/// ([`arm64::dotprod_enabled`]) and, in tests, the thread's cap allows them.
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+#[inline]
+fn dot() -> bool {
+    arm_cap() >= ARM_DOT && arm64::dotprod_enabled()
+}
+
+/// Test caps on aarch64: the portable kernels only, NEON, NEON with `sdot`.
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+const ARM_NEON: u8 = 1;
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+const ARM_DOT: u8 = 2;
+
+/// The cap of this thread (none outside tests).
+#[cfg(all(not(test), target_arch = "aarch64", target_feature = "neon"))]
+#[inline(always)]
+fn arm_cap() -> u8 {
+    ARM_DOT
+}
+
+#[cfg(all(test, target_arch = "aarch64", target_feature = "neon"))]
+fn arm_cap() -> u8 {
+    ARM_CAP.with(Cell::get)
 }
 
 #[cfg(all(test, target_arch = "aarch64", target_feature = "neon"))]
 std::thread_local! {
-    /// Whether the NEON kernels may run on this test thread.
-    static NEON_CAP: Cell<bool> = const { Cell::new(true) };
+    /// The highest aarch64 level the fast kernels may use on this test thread.
+    static ARM_CAP: Cell<u8> = const { Cell::new(ARM_DOT) };
 }
 
 /// General conv (`os`: the output shape).
@@ -147,7 +171,9 @@ pub(crate) fn pointwise(
         }
     }
     #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
-    if neon() && arm64::pointwise::pointwise(x, xs, w, b, q, out) {
+    if dot() && arm64::dot::pointwise(x, xs, w, b, q, out)
+        || neon() && arm64::pointwise::pointwise(x, xs, w, b, q, out)
+    {
         return;
     }
     portable::pointwise::pointwise(x, xs, w, b, q, out)
@@ -236,11 +262,14 @@ pub(crate) fn for_each_level(mut f: impl FnMut(&'static str)) {
         struct Cap;
         impl Drop for Cap {
             fn drop(&mut self) {
-                NEON_CAP.with(|c| c.set(true));
+                ARM_CAP.with(|c| c.set(ARM_DOT));
             }
         }
-        for (on, name) in [(true, "neon"), (false, "portable")] {
-            NEON_CAP.with(|c| c.set(on));
+        for (cap, name) in [(ARM_DOT, "dotprod"), (ARM_NEON, "neon"), (0, "portable")] {
+            if cap == ARM_DOT && !arm64::dotprod_available() {
+                continue;
+            }
+            ARM_CAP.with(|c| c.set(cap));
             let _cap = Cap;
             f(name);
         }
@@ -273,6 +302,25 @@ mod tests {
             (true, false) => &["avx2", "portable"],
             _ => &["portable"],
         };
+        assert_eq!(levels, want);
+    }
+}
+
+#[cfg(all(test, target_arch = "aarch64", target_feature = "neon"))]
+mod tests_arm {
+    use super::*;
+    use std::vec::Vec;
+
+    /// The run-time probe finds what std's detection finds, so the `kernel_equivalence!` tests
+    /// really run the `sdot` GEMM on a CPU (or `qemu-aarch64 -cpu`) that has it.
+    #[test]
+    fn run_time_detection_agrees_with_std() {
+        let dot = std::arch::is_aarch64_feature_detected!("dotprod");
+        assert_eq!(arm64::dotprod_available(), dot);
+        let mut levels = Vec::new();
+        for_each_level(|name| levels.push(name));
+        let want: &[&str] =
+            if dot { &["dotprod", "neon", "portable"] } else { &["neon", "portable"] };
         assert_eq!(levels, want);
     }
 }

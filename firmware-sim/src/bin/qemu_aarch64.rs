@@ -1,5 +1,6 @@
-//! Bare-metal image for `aarch64-unknown-none` on QEMU's `virt` board (Cortex-A72, EL1, MMU
-//! off, one core): checks its fast int8 kernels (NEON) against the reference kernels
+//! Bare-metal image for `aarch64-unknown-none` on QEMU's `virt` board (Cortex-A72 or A76, EL1,
+//! MMU off, one core): checks its fast int8 kernels (NEON; the `sdot` 1×1 GEMM where the CPU has
+//! the dot products, as the A76 does) against the reference kernels
 //! (`kernel_check`, exit status 1 on a difference), runs the embedded stereo frames through
 //! `Localiser` twice, geometric and
 //! then semantic (int8 network, semantic ORB, EM association), prints the report of
@@ -43,6 +44,7 @@ mod fw {
     use core::fmt::{self, Write};
     use core::mem::MaybeUninit;
 
+    use semloc_firmware_sim::core_crate::nn::arm64::dotprod_enabled;
     use semloc_firmware_sim::core_crate::seg::WeightScheme;
     use semloc_firmware_sim::core_crate::tracker::TrackerParams;
     use semloc_firmware_sim::embedded::{HEIGHT, MODEL_BLOB, WIDTH};
@@ -325,9 +327,10 @@ mod fw {
             Ok(r) => {
                 let _ = writeln!(
                     con,
-                    "@ kernels: {} 1x1, {} depthwise, {} first-layer convs, {} resizes and {} \
-                     adds bit-equal to the reference, {:.1} ms",
+                    "@ kernels: {} 1x1 ({}), {} depthwise, {} first-layer convs, {} resizes and \
+                     {} adds bit-equal to the reference, {:.1} ms",
                     r.pointwise,
+                    if dotprod_enabled() { "sdot" } else { "NEON" },
                     r.depthwise,
                     r.first_conv,
                     r.resize,

@@ -24,12 +24,12 @@ use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::Shape;
 
 /// Most pixels per tile.
-const TILE: usize = 8;
+pub(super) const TILE: usize = 8;
 /// `i16`s of the stage (8 KiB): [`TILE`] rows of up to 512 inputs, fewer rows of wider ones;
 /// rows wider than this take the portable kernel.
 const STAGE: usize = 4096;
 /// Blocks of 8 output channels whose requantisers are made once per call.
-const BLOCKS: usize = 32;
+pub(super) const BLOCKS: usize = 32;
 
 /// The NEON GEMM on operands [`crate::nn::conv::pointwise_fast`] has checked; `false` (nothing
 /// written) when a row is wider than [`STAGE`] or the vector requantisation does not hold.
@@ -64,13 +64,7 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let zp = q.input_zero_point as i16;
     let x = &x[..p * k];
     let out = &mut out[..p * n];
-    // pixels per tile: 8, 4, 2 or 1, as many rows as the stage holds
-    let tp = match STAGE / kp {
-        8.. => 8,
-        4..=7 => 4,
-        2 | 3 => 2,
-        _ => 1,
-    };
+    let tp = tile_rows(STAGE / kp);
     let mut st = [0i16; STAGE];
     // the requantisers of up to 256 output channels in lane form, made once (5 KiB)
     let mut rqs = [Rq8::ZERO; BLOCKS];
@@ -112,10 +106,20 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     }
 }
 
+/// Pixels per tile for a stage that holds `rows` rows: 8, 4, 2 or 1, as many as fit.
+pub(super) fn tile_rows(rows: usize) -> usize {
+    match rows {
+        8.. => 8,
+        4..=7 => 4,
+        2 | 3 => 2,
+        _ => 1,
+    }
+}
+
 /// A tile's sums widened to [`TILE`] pixels (the missing ones zero, not stored).
 #[target_feature(enable = "neon")]
 #[inline]
-fn pad<const P: usize>(a: [[int32x4_t; 2]; P]) -> [[int32x4_t; 2]; TILE] {
+pub(super) fn pad<const P: usize>(a: [[int32x4_t; 2]; P]) -> [[int32x4_t; 2]; TILE] {
     let z = vdupq_n_s32(0);
     core::array::from_fn(|i| if i < P { a[i] } else { [z; 2] })
 }
