@@ -13,6 +13,7 @@
 //! **Stack:** the widened weights and lane-form requantisers of up to 64 output channels
 //! (1.2 + 1.3 KiB; more channels: the portable kernel).
 
+use super::mem::{ld1q_s16, ld1q_s32};
 use core::arch::aarch64::*;
 
 use super::lanes::{store8, Rq8};
@@ -107,16 +108,15 @@ fn run(
                 }
             }
             // SAFETY: 8 `i16`s of `taps`.
-            let t8 = unsafe { vld1q_s16(taps.as_ptr()) };
+            let t8 = unsafe { ld1q_s16(taps.as_ptr()) };
             let t9 = vdup_n_s16(taps[8]);
             for (g, (o, r)) in opix.chunks_mut(8).zip(&rqs).enumerate().take(groups) {
                 let c0 = 8 * g;
                 // SAFETY: 8 `i32`s of `bias`, 8 `i16`s of each `wt[t]` (c0 + 8 ≤ 64).
                 let (mut a, wv) = unsafe {
-                    let a =
-                        [vld1q_s32(bias.as_ptr().add(c0)), vld1q_s32(bias.as_ptr().add(c0 + 4))];
+                    let a = [ld1q_s32(bias.as_ptr().add(c0)), ld1q_s32(bias.as_ptr().add(c0 + 4))];
                     let wv: [int16x8_t; 9] =
-                        core::array::from_fn(|t| vld1q_s16(wt[t].as_ptr().add(c0)));
+                        core::array::from_fn(|t| ld1q_s16(wt[t].as_ptr().add(c0)));
                     (a, wv)
                 };
                 macro_rules! tap {

@@ -14,6 +14,7 @@
 //! **Stack:** the lane-form requantisers of up to 256 channels (5 KiB; wider layers make the
 //! others per row).
 
+use super::mem::{ld1_s8, ld1q_s32};
 use core::arch::aarch64::*;
 
 use super::lanes::{load8, store8, Rq8};
@@ -83,7 +84,7 @@ fn run(
             let mut bias = [0i32; 8];
             bias[..nb].copy_from_slice(&b[c0..c0 + nb]);
             // SAFETY: 8 `i32`s.
-            let b0 = unsafe { [vld1q_s32(bias.as_ptr()), vld1q_s32(bias.as_ptr().add(4))] };
+            let b0 = unsafe { [ld1q_s32(bias.as_ptr()), ld1q_s32(bias.as_ptr().add(4))] };
             let mut wv = [vdupq_n_s16(0); 9];
             for (t, v) in wv.iter_mut().enumerate() {
                 *v = vmovl_s8(load8(&w[t * c + c0..t * c + c0 + nb], 0));
@@ -111,7 +112,7 @@ fn run(
                         for t in 0..9 {
                             // SAFETY: `t / 3 · row + t % 3 · c + 8 ≤ 2·row + 2·c + 8`, inside
                             // `x` by the check above.
-                            let xv = unsafe { vld1_s8(p.add(t / 3 * row + t % 3 * c)) };
+                            let xv = unsafe { ld1_s8(p.add(t / 3 * row + t % 3 * c)) };
                             mac!(a, xv, wv[t]);
                         }
                     }

@@ -26,6 +26,7 @@
 //! **Stack:** the 8 KiB stage and the corrected biases of up to 256 output channels (1 KiB);
 //! the requantisers as in [`super::pointwise`] (5 KiB).
 
+use super::mem::{ld1q_s32, ld1q_s8};
 use core::arch::aarch64::*;
 use core::arch::asm;
 
@@ -91,7 +92,7 @@ fn sdot<const L: i32>(acc: int32x4_t, w: int8x16_t, x: int8x16_t) -> int32x4_t {
 #[inline]
 fn weights(wg: &[i8; GROUP_BYTES]) -> (int8x16_t, int8x16_t) {
     // SAFETY: 32 bytes.
-    unsafe { (vld1q_s8(wg.as_ptr()), vld1q_s8(wg.as_ptr().add(16))) }
+    unsafe { (ld1q_s8(wg.as_ptr()), ld1q_s8(wg.as_ptr().add(16))) }
 }
 
 /// A block's 8 sums before any input: `b − zp · Σw` per channel (wrapping), over its panel.
@@ -106,7 +107,7 @@ fn block_bias(bias: &[i32; PW_BLOCK], panel: &[i8], zp: i32) -> [int32x4_t; 2] {
         s = [sdot::<0>(s[0], w0, ones), sdot::<0>(s[1], w1, ones)];
     }
     // SAFETY: 8 `i32`s.
-    let b = unsafe { [vld1q_s32(bias.as_ptr()), vld1q_s32(bias.as_ptr().add(4))] };
+    let b = unsafe { [ld1q_s32(bias.as_ptr()), ld1q_s32(bias.as_ptr().add(4))] };
     [vmlsq_n_s32(b[0], s[0], zp), vmlsq_n_s32(b[1], s[1], zp)]
 }
 
@@ -206,7 +207,7 @@ fn tile<const P: usize>(
         let xv: [int8x16_t; P] = core::array::from_fn(|i| {
             let r = &rows[i][CHUNK * c..CHUNK * c + CHUNK];
             // SAFETY: 16 bytes.
-            unsafe { vld1q_s8(r.as_ptr()) }
+            unsafe { ld1q_s8(r.as_ptr()) }
         });
         let mut gs =
             wc.chunks_exact(GROUP_BYTES).filter_map(|g| <&[i8; GROUP_BYTES]>::try_from(g).ok());

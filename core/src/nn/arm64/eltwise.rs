@@ -8,6 +8,7 @@
 //!
 //! **Stack:** none beyond registers (three requantisers' constants, 8 bytes of tail).
 
+use super::mem::{ld1_s8, st1_s8};
 use core::arch::aarch64::*;
 
 use super::lanes::{load8, store8, Rq8};
@@ -63,9 +64,9 @@ fn run(a: &[i8], b: &[i8], shape: Shape, q: &AddQuant, out: &mut [i8]) {
     let (mut ac, mut bc) = (a.chunks_exact(8), b.chunks_exact(8));
     for ((o, x), y) in (&mut oc).zip(&mut ac).zip(&mut bc) {
         // SAFETY: 8 bytes each.
-        let v = unsafe { add8(vld1_s8(x.as_ptr()), vld1_s8(y.as_ptr())) };
+        let v = unsafe { add8(ld1_s8(x.as_ptr()), ld1_s8(y.as_ptr())) };
         // SAFETY: 8 bytes of `o`.
-        unsafe { vst1_s8(o.as_mut_ptr(), v) };
+        unsafe { st1_s8(o.as_mut_ptr(), v) };
     }
     let (ar, br, or) = (ac.remainder(), bc.remainder(), oc.into_remainder());
     if !or.is_empty() {

@@ -11,6 +11,7 @@
 //!    ((s & mask) > half − (s >> 31))`, the shift an `sshl` by `−e`,
 //! 4. `+ zp`, clamp to `[lo, hi]` (within `i8`), two narrowing moves.
 
+use super::mem::{ld1_s8, ld1q_s32, st1_s8};
 use core::arch::aarch64::*;
 
 use crate::nn::quant::{Lane1, Requant};
@@ -63,7 +64,7 @@ impl Rq8 {
         let two = |a: &[i32; 8]| {
             let (l, h) = a.split_at(4);
             // SAFETY: `l` and `h` are 4 `i32`s each.
-            unsafe { [vld1q_s32(l.as_ptr()), vld1q_s32(h.as_ptr())] }
+            unsafe { [ld1q_s32(l.as_ptr()), ld1q_s32(h.as_ptr())] }
         };
         Rq8Regs {
             m: two(&self.m),
@@ -116,11 +117,11 @@ impl Rq8Regs {
 pub(crate) fn store8(out: &mut [i8], v: int8x8_t) {
     match <&mut [i8; 8]>::try_from(&mut *out) {
         // SAFETY: 8 bytes of `out`.
-        Ok(o) => unsafe { vst1_s8(o.as_mut_ptr(), v) },
+        Ok(o) => unsafe { st1_s8(o.as_mut_ptr(), v) },
         Err(_) => {
             let mut t = [0i8; 8];
             // SAFETY: 8 bytes of `t`.
-            unsafe { vst1_s8(t.as_mut_ptr(), v) };
+            unsafe { st1_s8(t.as_mut_ptr(), v) };
             let n = out.len().min(8);
             out[..n].copy_from_slice(&t[..n]);
         }
@@ -133,11 +134,11 @@ pub(crate) fn store8(out: &mut [i8], v: int8x8_t) {
 pub(crate) fn load8(v: &[i8], pad: i8) -> int8x8_t {
     match <&[i8; 8]>::try_from(v) {
         // SAFETY: 8 bytes.
-        Ok(a) => unsafe { vld1_s8(a.as_ptr()) },
+        Ok(a) => unsafe { ld1_s8(a.as_ptr()) },
         Err(_) => {
             let t: [i8; 8] = core::array::from_fn(|i| v.get(i).copied().unwrap_or(pad));
             // SAFETY: 8 bytes of `t`.
-            unsafe { vld1_s8(t.as_ptr()) }
+            unsafe { ld1_s8(t.as_ptr()) }
         }
     }
 }

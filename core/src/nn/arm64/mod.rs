@@ -12,6 +12,7 @@
 //! | `resize`    | `Resize` bilinear, `half_pixel`               | `ssubl`, `smull`, `mla`       | 1.5 KiB |
 //! | `eltwise`   | `Add`                                         | `sshll`, `sqrdmulh`           | —       |
 //! | `lanes`     | shared: requantisation of 8 lanes             | `sqrdmulh`, `sshl`, `xtn`     | —       |
+//! | `mem`       | shared: vector loads and stores               | `ld1`, `st1` on bare metal    | —       |
 //!
 //! NEON (Advanced SIMD) is part of every aarch64 target this crate builds for
 //! (`aarch64-unknown-none`, `aarch64-unknown-linux-gnu`: `target_feature = "neon"`), so the
@@ -52,6 +53,7 @@ pub(crate) mod depthwise;
 pub(crate) mod dot;
 pub(crate) mod eltwise;
 pub(crate) mod lanes;
+pub(crate) mod mem;
 pub(crate) mod pointwise;
 pub(crate) mod resize;
 

@@ -16,6 +16,7 @@
 //! **Stack:** the 8 KiB stage and the lane-form requantisers of up to 256 output channels
 //! (5 KiB; wider layers make the others per tile).
 
+use super::mem::{ld1_s16, ld1q_s32};
 use core::arch::aarch64::*;
 
 use super::lanes::{store8, Rq8};
@@ -137,7 +138,7 @@ fn tile<const P: usize>(
     let wp = &wp[..kp * PW_BLOCK];
     let rows: [&[i16]; P] = core::array::from_fn(|i| &st[i * kp..(i + 1) * kp]);
     // SAFETY: 8 `i32`s.
-    let b = unsafe { [vld1q_s32(bias.as_ptr()), vld1q_s32(bias.as_ptr().add(4))] };
+    let b = unsafe { [ld1q_s32(bias.as_ptr()), ld1q_s32(bias.as_ptr().add(4))] };
     let mut acc = [b; P];
     for (g, wg) in wp.chunks_exact(PW_BLOCK * PW_GROUP).enumerate() {
         // SAFETY: `wg` is 32 bytes; `.t` = the 8 channels' weights of input `4g + t`.
@@ -147,7 +148,7 @@ fn tile<const P: usize>(
             // inside the row: `4g + 4 ≤ kp`
             let xr = &row[PW_GROUP * g..PW_GROUP * g + PW_GROUP];
             // SAFETY: 4 `i16`s.
-            let xv = unsafe { vld1_s16(xr.as_ptr()) };
+            let xv = unsafe { ld1_s16(xr.as_ptr()) };
             a[0] = vmlal_lane_s16::<0>(a[0], vget_low_s16(w0), xv);
             a[1] = vmlal_high_lane_s16::<0>(a[1], w0, xv);
             a[0] = vmlal_lane_s16::<1>(a[0], vget_low_s16(w1), xv);

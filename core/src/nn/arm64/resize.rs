@@ -16,6 +16,7 @@
 //!
 //! **Stack:** the x taps of 64 columns (1.5 KiB).
 
+use super::mem::{ld1_s8, st1_s8};
 use core::arch::aarch64::*;
 
 use super::lanes::{load8, store8, Rq8};
@@ -81,10 +82,10 @@ fn run(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i8], os: Shape) {
                         // SAFETY: `p0 ≤ p1` and `p1 + c0 + 8 ≤ row`: inside both rows.
                         unsafe {
                             [
-                                vld1_s8(r0.as_ptr().add(p0 + c0)),
-                                vld1_s8(r0.as_ptr().add(p1 + c0)),
-                                vld1_s8(r1.as_ptr().add(p0 + c0)),
-                                vld1_s8(r1.as_ptr().add(p1 + c0)),
+                                ld1_s8(r0.as_ptr().add(p0 + c0)),
+                                ld1_s8(r0.as_ptr().add(p1 + c0)),
+                                ld1_s8(r1.as_ptr().add(p0 + c0)),
+                                ld1_s8(r1.as_ptr().add(p1 + c0)),
                             ]
                         }
                     } else {
@@ -112,7 +113,7 @@ fn run(x: &[i8], xs: Shape, q: &ResizeQuant, out: &mut [i8], os: Shape) {
                         // a short group's extra bytes land on later pixels of this row, each
                         // written after this one (bands and pixels run left to right)
                         // SAFETY: 8 bytes of `orow`.
-                        Some(dst) => unsafe { vst1_s8(dst.as_mut_ptr(), v) },
+                        Some(dst) => unsafe { st1_s8(dst.as_mut_ptr(), v) },
                         None => store8(&mut orow[o..o + nb], v),
                     }
                     c0 += nb;
