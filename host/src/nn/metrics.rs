@@ -40,6 +40,14 @@ impl Confusion {
         }
     }
 
+    /// Adds another matrix's counts (integer sums: the totals of frames scored in parts, e.g.
+    /// on several threads, are the same in any order).
+    pub fn merge(&mut self, other: &Confusion) {
+        for (row, orow) in self.m.iter_mut().zip(&other.m) {
+            row.iter_mut().zip(orow).for_each(|(a, b)| *a += b);
+        }
+    }
+
     /// Per-class IoU (NaN for a class with no truth and no prediction).
     pub fn iou(&self) -> Vec<f64> {
         iou(&self.m.iter().map(|r| r.to_vec()).collect::<Vec<_>>())
@@ -180,6 +188,19 @@ mod tests {
         assert_eq!(c.pixel_accuracy(), 0.5);
         // dynamic mask: one pixel predicted car on void truth (not counted), none on truth
         assert!(c.dynamic_precision().is_nan() && c.dynamic_recall().is_nan());
+    }
+
+    #[test]
+    fn merged_parts_equal_the_whole() {
+        let (truth, pred) = ([0u8, 3, 3, 8, 9, 11, 5, 8], [0u8, 3, 4, 8, 8, 2, 5, 12]);
+        let mut whole = Confusion::default();
+        whole.add(&truth, &pred);
+        let (mut a, mut b) = (Confusion::default(), Confusion::default());
+        a.add(&truth[..3], &pred[..3]);
+        b.add(&truth[3..], &pred[3..]);
+        a.merge(&b);
+        assert_eq!(a, whole);
+        assert_eq!(whole.m.iter().flatten().sum::<u64>(), 7); // the void pixel is not counted
     }
 
     #[test]

@@ -96,11 +96,8 @@ struct Compared {
 impl Compared {
     /// Adds another part's counts (integer sums: the same totals in any order).
     fn merge(&mut self, o: &Compared) {
-        for (a, b) in [(&mut self.int8, &o.int8), (&mut self.f32, &o.f32)] {
-            for (ra, rb) in a.m.iter_mut().zip(&b.m) {
-                ra.iter_mut().zip(rb).for_each(|(x, y)| *x += y);
-            }
-        }
+        self.int8.merge(&o.int8);
+        self.f32.merge(&o.f32);
         self.agree += o.agree;
         self.pixels += o.pixels;
     }
