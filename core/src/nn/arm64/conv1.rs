@@ -11,7 +11,7 @@
 //! loop did the same through memory: 43 M guest instructions a frame under `qemu-aarch64`.
 //!
 //! **Stack:** the widened weights and lane-form requantisers of up to 64 output channels
-//! (1.2 + 1.3 KiB; more channels: the portable kernel).
+//! (1.2 + 1 KiB; more channels: the portable kernel).
 
 use super::mem::{ld1q_s16, ld1q_s32};
 use core::arch::aarch64::*;

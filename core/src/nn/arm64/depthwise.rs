@@ -11,7 +11,7 @@
 //! short last group) take only their valid taps through checked loads, a short group's missing
 //! lanes reading as the zero point (weight 0), and store only their channels.
 //!
-//! **Stack:** the lane-form requantisers of up to 256 channels (5 KiB; wider layers make the
+//! **Stack:** the lane-form requantisers of up to 256 channels (4 KiB; wider layers make the
 //! others per row).
 
 use super::mem::{ld1_s8, ld1q_s32};

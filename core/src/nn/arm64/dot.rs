@@ -24,7 +24,7 @@
 //! `sdot` is written in `asm!`: its intrinsics (`vdotq_laneq_s32`) are not stable Rust.
 //!
 //! **Stack:** the 8 KiB stage and the corrected biases of up to 256 output channels (1 KiB);
-//! the requantisers as in [`super::pointwise`] (5 KiB).
+//! the requantisers as in [`super::pointwise`] (4 KiB).
 
 use super::mem::{ld1q_s32, ld1q_s8};
 use core::arch::aarch64::*;

@@ -7,8 +7,13 @@
 //! 2. `sqrdmulh` by the multiplier: `sat((2·v·M + 2^31) >> 32)` = `floor((v·M + 2^30) / 2^31)`,
 //!    gemmlowp's `SaturatingRoundingDoublingHighMul` (its only saturating case, `v = M =
 //!    i32::MIN`, cannot occur: `M ≥ 0`),
-//! 3. gemmlowp's `RoundingDivideByPOT` as the portable lanes compute it: `(s >> e) +
-//!    ((s & mask) > half − (s >> 31))`, the shift an `sshl` by `−e`,
+//! 3. gemmlowp's `RoundingDivideByPOT` by `e`, which rounds ties away from zero, as an `srshl`
+//!    by `−e` (a rounding shift: `(u + 2^(e−1)) >> e`, ties up) of `u = s − 1` on negative lanes
+//!    with `e > 0`, else `u = s`. Write `s = q·2^e + r` (`0 ≤ r < 2^e`): gemmlowp gives
+//!    `q + (r > 2^(e−1) − 1 + [s < 0])`, and `srshl` of `u` gives `q + (r + 2^(e−1) − [s < 0] ≥
+//!    2^e)`, the same predicate; `s − 1` cannot wrap (`|s| ≤ 2^30` under the bound). Three
+//!    instructions and the `srshl`, where the portable lanes' `(s >> e) + ((s & mask) > half −
+//!    (s >> 31))` takes six;
 //! 4. `+ zp`, clamp to `[lo, hi]` (within `i8`), two narrowing moves.
 
 use super::mem::{ld1_s8, ld1q_s32, st1_s8};
@@ -21,10 +26,10 @@ use crate::nn::quant::{Lane1, Requant};
 pub(crate) struct Rq8 {
     m: [i32; 8],
     left: [i32; 8],
-    /// `−e`: `sshl` by it is the arithmetic right shift by `e`.
+    /// `−e`: `srshl` by it is the rounding right shift by `e`.
     right: [i32; 8],
-    mask: [i32; 8],
-    half: [i32; 8],
+    /// All ones where `e > 0` (a negative lane takes the tie fix-up), else 0.
+    nz: [i32; 8],
 }
 
 /// [`Rq8`]'s constants in registers, for a loop that requantises many pixels of one group.
@@ -33,8 +38,7 @@ pub(crate) struct Rq8Regs {
     m: [int32x4_t; 2],
     left: [int32x4_t; 2],
     right: [int32x4_t; 2],
-    mask: [int32x4_t; 2],
-    half: [int32x4_t; 2],
+    nz: [int32x4_t; 2],
     zp: int32x4_t,
     lo: int32x4_t,
     hi: int32x4_t,
@@ -42,8 +46,7 @@ pub(crate) struct Rq8Regs {
 
 impl Rq8 {
     /// All lanes zero.
-    pub(crate) const ZERO: Rq8 =
-        Rq8 { m: [0; 8], left: [0; 8], right: [0; 8], mask: [0; 8], half: [0; 8] };
+    pub(crate) const ZERO: Rq8 = Rq8 { m: [0; 8], left: [0; 8], right: [0; 8], nz: [0; 8] };
 
     /// From up to 8 requantisers.
     pub(crate) fn new(r: &[Requant]) -> Self {
@@ -51,8 +54,8 @@ impl Rq8 {
         for (i, q) in r.iter().take(8).enumerate() {
             let q = Lane1::new(*q);
             // M < 2^31 and the shifts ≤ 31 fit the `i32` lanes
-            (l.m[i], l.left[i], l.right[i], l.mask[i], l.half[i]) =
-                (q.m as i32, q.left as i32, -(q.right as i32), q.mask, q.half);
+            (l.m[i], l.left[i], l.right[i], l.nz[i]) =
+                (q.m as i32, q.left as i32, -(q.right as i32), -((q.right > 0) as i32));
         }
         l
     }
@@ -70,8 +73,7 @@ impl Rq8 {
             m: two(&self.m),
             left: two(&self.left),
             right: two(&self.right),
-            mask: two(&self.mask),
-            half: two(&self.half),
+            nz: two(&self.nz),
             zp: vdupq_n_s32(zp),
             lo: vdupq_n_s32(lo),
             hi: vdupq_n_s32(hi),
@@ -102,11 +104,9 @@ impl Rq8Regs {
     fn half4(&self, acc: int32x4_t, j: usize) -> int32x4_t {
         let v = vshlq_s32(acc, self.left[j]);
         let s = vqrdmulhq_s32(v, self.m[j]);
-        // half + 1 where s < 0 (`s >> 31` is −1 there)
-        let t = vsubq_s32(self.half[j], vshrq_n_s32::<31>(s));
-        let up = vcgtq_s32(vandq_s32(s, self.mask[j]), t);
-        // a true compare is all ones (−1): subtracting it adds one
-        let q = vsubq_s32(vshlq_s32(s, self.right[j]), vreinterpretq_s32_u32(up));
+        // s − 1 on negative lanes with e > 0 (`s >> 31` is −1 there), then the rounding shift
+        let u = vaddq_s32(s, vandq_s32(vshrq_n_s32::<31>(s), self.nz[j]));
+        let q = vrshlq_s32(u, self.right[j]);
         vminq_s32(vmaxq_s32(vaddq_s32(q, self.zp), self.lo), self.hi)
     }
 }

@@ -5,13 +5,13 @@
 //!
 //! | file        | ONNX op                                       | instructions                  | stack   |
 //! |-------------|-----------------------------------------------|-------------------------------|---------|
-//! | `pointwise` | `Conv` 1×1 (int8 GEMM over packed weights)    | `ld4`, `sxtl`, `smlal` (lane) | 13 KiB  |
-//! | `dot`       | `Conv` 1×1, on CPUs with FEAT_DotProd         | `sdot` (lane)                 | 14 KiB  |
-//! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2       | `ssubl`, `sxtl`, `smlal`      | 5 KiB   |
-//! | `conv1`     | `Conv` 3×3 of a one-channel map (first layer) | `smlal` (lane)                | 2.5 KiB |
+//! | `pointwise` | `Conv` 1×1 (int8 GEMM over packed weights)    | `ld4`, `sxtl`, `smlal` (lane) | 12 KiB  |
+//! | `dot`       | `Conv` 1×1, on CPUs with FEAT_DotProd         | `sdot` (lane)                 | 13 KiB  |
+//! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2       | `ssubl`, `sxtl`, `smlal`      | 4 KiB   |
+//! | `conv1`     | `Conv` 3×3 of a one-channel map (first layer) | `smlal` (lane)                | 2.2 KiB |
 //! | `resize`    | `Resize` bilinear, `half_pixel`               | `ssubl`, `smull`, `mla`       | 1.5 KiB |
 //! | `eltwise`   | `Add`                                         | `sshll`, `sqrdmulh`           | —       |
-//! | `lanes`     | shared: requantisation of 8 lanes             | `sqrdmulh`, `sshl`, `xtn`     | —       |
+//! | `lanes`     | shared: requantisation of 8 lanes             | `sqrdmulh`, `srshl`, `xtn`    | —       |
 //! | `mem`       | shared: vector loads and stores               | `ld1`, `st1` on bare metal    | —       |
 //!
 //! NEON (Advanced SIMD) is part of every aarch64 target this crate builds for

@@ -14,7 +14,7 @@
 //! registers ([`super::lanes::Rq8Regs`]).
 //!
 //! **Stack:** the 8 KiB stage and the lane-form requantisers of up to 256 output channels
-//! (5 KiB; wider layers make the others per tile).
+//! (4 KiB; wider layers make the others per tile).
 
 use super::mem::{ld1_s16, ld1q_s32};
 use core::arch::aarch64::*;
@@ -67,7 +67,7 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let out = &mut out[..p * n];
     let tp = tile_rows(STAGE / kp);
     let mut st = [0i16; STAGE];
-    // the requantisers of up to 256 output channels in lane form, made once (5 KiB)
+    // the requantisers of up to 256 output channels in lane form, made once (4 KiB)
     let mut rqs = [Rq8::ZERO; BLOCKS];
     for (r, qq) in rqs.iter_mut().zip(q.requant.chunks(PW_BLOCK)) {
         *r = Rq8::new(qq);
