@@ -159,11 +159,6 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
                 Some(s) => *s,
                 None => block_sums(blk, wp),
             };
-            let rq = match rqs.get(blk) {
-                Some(r) => *r,
-                None => Rq8::new(&q.requant[k0..k0 + nb]),
-            }
-            .regs(q.output_zero_point, lo, hi);
             // a short last tile takes the next size up within the tile: the extra rows hold
             // an earlier tile's pixels (or zeros), whose sums are not stored
             let acc = match np {
@@ -172,6 +167,12 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
                 2 => pad(tile::<2>(st, kp, wp, bias)),
                 _ => pad(tile::<1>(st, kp, wp, bias)),
             };
+            // the requantisers' registers only after the tile, which needs all but a few
+            let rq = match rqs.get(blk) {
+                Some(r) => *r,
+                None => Rq8::new(&q.requant[k0..k0 + nb]),
+            }
+            .regs(q.output_zero_point, lo, hi);
             for (i, a) in acc.iter().take(np).enumerate() {
                 store8(&mut ot[i * n + k0..i * n + k0 + nb], rq.requant(*a));
             }

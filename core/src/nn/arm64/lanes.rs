@@ -14,7 +14,15 @@
 //!    2^e)`, the same predicate; `s − 1` cannot wrap (`|s| ≤ 2^30` under the bound). Three
 //!    instructions and the `srshl`, where the portable lanes' `(s >> e) + ((s & mask) > half −
 //!    (s >> 31))` takes six;
-//! 4. `+ zp`, clamp to `[lo, hi]` (within `i8`), two narrowing moves.
+//! 4. for `i8` outputs ([`Rq8Regs::requant`]): saturating narrows to `i16` (`sqxtn`,
+//!    `sqxtn2`), `+ zp` saturating (`sqadd`), a saturating narrow to `i8`, then the clamp to
+//!    `[lo, hi]`, whose `hi` is 127 for every `i8` output (`clamp_range`), so only the `max`
+//!    remains. With `|zp| ≤ 128` and `−128 ≤ lo ≤ 127` that is `clamp(q + zp, lo, 127)`: where
+//!    `q + zp` fits an `i16` the narrows only clamp it to `[−128, 127]`; beyond, the saturated
+//!    value stays beyond the `i8` range on the same side, so the result is `lo` or 127, as
+//!    `clamp` gives. 5 instructions per 8 lanes where `+ zp`, `max` and `min` on the `i32`
+//!    lanes and three narrowing moves took 9. `i32` outputs ([`Rq8Regs::requant_i32`], `Add`'s inputs) add `zp`
+//!    and clamp on the `i32` lanes.
 
 use super::mem::{ld1_s8, ld1q_s32, st1_s8};
 use core::arch::aarch64::*;
@@ -42,6 +50,10 @@ pub(crate) struct Rq8Regs {
     zp: int32x4_t,
     lo: int32x4_t,
     hi: int32x4_t,
+    /// `zp` and `lo` for the `i8` outputs (saturated to their types: [`Rq8Regs::requant`] is
+    /// used only with zero points and clamp ranges within `i8`, and `hi = 127`).
+    zp16: int16x8_t,
+    lo8: int8x8_t,
 }
 
 impl Rq8 {
@@ -77,6 +89,8 @@ impl Rq8 {
             zp: vdupq_n_s32(zp),
             lo: vdupq_n_s32(lo),
             hi: vdupq_n_s32(hi),
+            zp16: vdupq_n_s16(zp.clamp(i16::MIN.into(), i16::MAX.into()) as i16),
+            lo8: vdup_n_s8(lo.clamp(-128, 127) as i8),
         }
     }
 }
@@ -86,8 +100,10 @@ impl Rq8Regs {
     #[target_feature(enable = "neon")]
     #[inline]
     pub(crate) fn requant(&self, acc: [int32x4_t; 2]) -> int8x8_t {
-        let [a, b] = self.requant_i32(acc);
-        vmovn_s16(vcombine_s16(vmovn_s32(a), vmovn_s32(b)))
+        // every `i8` output's range ends at 127 (`clamp_range`), where `sqxtn` saturates
+        debug_assert_eq!(vgetq_lane_s32::<0>(self.hi), 127);
+        let h = vqmovn_high_s32(vqmovn_s32(self.apply4(acc[0], 0)), self.apply4(acc[1], 1));
+        vmax_s8(vqmovn_s16(vqaddq_s16(h, self.zp16)), self.lo8)
     }
 
     /// `clamp(zp + apply(acc), lo, hi)` of the 8 lanes, not narrowed (with `zp = 0`,
@@ -95,19 +111,19 @@ impl Rq8Regs {
     #[target_feature(enable = "neon")]
     #[inline]
     pub(crate) fn requant_i32(&self, acc: [int32x4_t; 2]) -> [int32x4_t; 2] {
-        [self.half4(acc[0], 0), self.half4(acc[1], 1)]
+        let c = |q: int32x4_t| vminq_s32(vmaxq_s32(vaddq_s32(q, self.zp), self.lo), self.hi);
+        [c(self.apply4(acc[0], 0)), c(self.apply4(acc[1], 1))]
     }
 
-    /// Lanes `4j..4j + 4` of [`Rq8Regs::requant`], before narrowing.
+    /// `apply(acc)` of lanes `4j..4j + 4` (steps 1-3 of the module's text).
     #[target_feature(enable = "neon")]
     #[inline]
-    fn half4(&self, acc: int32x4_t, j: usize) -> int32x4_t {
+    fn apply4(&self, acc: int32x4_t, j: usize) -> int32x4_t {
         let v = vshlq_s32(acc, self.left[j]);
         let s = vqrdmulhq_s32(v, self.m[j]);
         // s − 1 on negative lanes with e > 0 (`s >> 31` is −1 there), then the rounding shift
         let u = vaddq_s32(s, vandq_s32(vshrq_n_s32::<31>(s), self.nz[j]));
-        let q = vrshlq_s32(u, self.right[j]);
-        vminq_s32(vmaxq_s32(vaddq_s32(q, self.zp), self.lo), self.hi)
+        vrshlq_s32(u, self.right[j])
     }
 }
 
