@@ -46,8 +46,9 @@ const MAX_K: usize = 4096;
 const GROUP_BYTES: usize = PW_BLOCK * PW_GROUP;
 
 /// The `sdot` GEMM on operands [`crate::nn::conv::pointwise_fast`] has checked; `false`
-/// (nothing written) when a row is wider than [`MAX_K`] or the vector requantisation does not
-/// hold. The caller has checked [`super::dotprod_enabled`].
+/// (nothing written) when the CPU has no dot products ([`super::dotprod_enabled`]: the
+/// dispatcher asks first, but the `unsafe` call below relies on this check alone), a row is
+/// wider than [`MAX_K`] or the vector requantisation does not hold.
 pub(crate) fn pointwise(
     x: &[i8],
     xs: Shape,
@@ -57,12 +58,14 @@ pub(crate) fn pointwise(
     out: &mut [i8],
 ) -> bool {
     let k = xs.c;
-    if k > MAX_K || !fits_simd_requant(k as i64 * 255 * 128, b, q.requant) {
+    if !super::dotprod_enabled()
+        || k > MAX_K
+        || !fits_simd_requant(k as i64 * 255 * 128, b, q.requant)
+    {
         return false;
     }
-    debug_assert!(super::dotprod_enabled());
     // SAFETY: this module is compiled only where `neon` is a target feature of the build, and
-    // the dispatcher calls it only when the CPU has FEAT_DotProd (`super::dotprod_enabled`).
+    // the CPU has FEAT_DotProd (`super::dotprod_enabled`, checked above).
     unsafe { run(x, xs, w, b, q, out) };
     true
 }
