@@ -17,14 +17,11 @@
 use super::mem::{ld1_s8, ld1q_s32};
 use core::arch::aarch64::*;
 
-use super::lanes::{load8, store8, Rq8};
+use super::lanes::{block8, load8, store8, Rq8Table};
 use crate::nn::conv::ConvQuant;
 use crate::nn::portable::conv::tap_range;
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::Shape;
-
-/// Groups of 8 channels whose requantisers are made once per call.
-const GROUPS: usize = 32;
 
 /// The depthwise 3×3 conv on operands [`crate::nn::conv::depthwise3x3_fast`] has checked (`os`
 /// the output shape); `false` (nothing written) when the vector requantisation does not hold.
@@ -67,22 +64,14 @@ fn run(
     let x = &x[..xs.len()];
     let w = &w[..9 * c];
     let row = xs.w * c;
-    let mut rqs = [Rq8::ZERO; GROUPS];
-    for (r, qq) in rqs.iter_mut().zip(q.requant.chunks(8)) {
-        *r = Rq8::new(qq);
-    }
+    let rqs = Rq8Table::new(q.requant);
     for (oy, orow) in out[..os.len()].chunks_exact_mut(os.w * c).enumerate() {
         let (ky0, ky1) = tap_range(oy, stride, 1, 3, xs.h);
         for g in 0..c.div_ceil(8) {
             let c0 = 8 * g;
             let nb = (c - c0).min(8);
-            let rq = match rqs.get(g) {
-                Some(r) => *r,
-                None => Rq8::new(&q.requant[c0..c0 + nb]),
-            }
-            .regs(q.output_zero_point, lo, hi);
-            let mut bias = [0i32; 8];
-            bias[..nb].copy_from_slice(&b[c0..c0 + nb]);
+            let rq = rqs.block(g).regs(q.output_zero_point, lo, hi);
+            let bias = block8(b, c0);
             // SAFETY: 8 `i32`s.
             let b0 = unsafe { [ld1q_s32(bias.as_ptr()), ld1q_s32(bias.as_ptr().add(4))] };
             let mut wv = [vdupq_n_s16(0); 9];

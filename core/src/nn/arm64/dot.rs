@@ -30,8 +30,8 @@ use super::mem::{ld1q_s32, ld1q_s8};
 use core::arch::aarch64::*;
 use core::arch::asm;
 
-use super::lanes::{store8, Rq8};
-use super::pointwise::{pad, tile_rows, BLOCKS};
+use super::lanes::{block8, store8, Rq8Table, TABLE};
+use super::pointwise::{pad, tile_rows};
 use crate::nn::conv::{ConvQuant, PW_BLOCK, PW_GROUP};
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::Shape;
@@ -130,20 +130,11 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let out = &mut out[..p * n];
     let tp = tile_rows(STAGE / kp);
     let mut st = [0i8; STAGE];
-    let mut rqs = [Rq8::ZERO; BLOCKS];
-    for (r, qq) in rqs.iter_mut().zip(q.requant.chunks(PW_BLOCK)) {
-        *r = Rq8::new(qq);
-    }
-    // the blocks' starting sums, made once for up to BLOCKS blocks (1 KiB)
+    let rqs = Rq8Table::new(q.requant);
+    // the blocks' starting sums, made once for up to TABLE blocks (1 KiB)
     let z = vdupq_n_s32(0);
-    let mut sums = [[z; 2]; BLOCKS];
-    let block_sums = |blk: usize, wp: &[i8]| {
-        let k0 = blk * PW_BLOCK;
-        let nb = (n - k0).min(PW_BLOCK);
-        let mut bias = [0i32; PW_BLOCK];
-        bias[..nb].copy_from_slice(&b[k0..k0 + nb]);
-        block_bias(&bias, wp, zp)
-    };
+    let mut sums = [[z; 2]; TABLE];
+    let block_sums = |blk: usize, wp: &[i8]| block_bias(&block8(b, blk * PW_BLOCK), wp, zp);
     for ((blk, wp), s) in w.chunks_exact(panel).enumerate().zip(sums.iter_mut()) {
         *s = block_sums(blk, wp);
     }
@@ -171,11 +162,7 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
                 _ => pad(tile::<1>(st, kp, wp, bias)),
             };
             // the requantisers' registers only after the tile, which needs all but a few
-            let rq = match rqs.get(blk) {
-                Some(r) => *r,
-                None => Rq8::new(&q.requant[k0..k0 + nb]),
-            }
-            .regs(q.output_zero_point, lo, hi);
+            let rq = rqs.block(blk).regs(q.output_zero_point, lo, hi);
             for (i, a) in acc.iter().take(np).enumerate() {
                 store8(&mut ot[i * n + k0..i * n + k0 + nb], rq.requant(*a));
             }

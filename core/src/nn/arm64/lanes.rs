@@ -95,6 +95,45 @@ impl Rq8 {
     }
 }
 
+/// Blocks of 8 channels whose lane-form requantisers [`Rq8Table`] makes once per call (4 KiB).
+pub(crate) const TABLE: usize = 32;
+
+/// The lane-form requantisers of a layer's blocks of 8 channels: the first [`TABLE`] made once
+/// per call, those beyond (wider layers) when asked for.
+pub(crate) struct Rq8Table<'a> {
+    first: [Rq8; TABLE],
+    all: &'a [Requant],
+}
+
+impl<'a> Rq8Table<'a> {
+    /// The table of `all` (one requantiser per channel).
+    pub(crate) fn new(all: &'a [Requant]) -> Self {
+        let mut first = [Rq8::ZERO; TABLE];
+        for (r, qq) in first.iter_mut().zip(all.chunks(8)) {
+            *r = Rq8::new(qq);
+        }
+        Rq8Table { first, all }
+    }
+
+    /// Block `blk`'s (channels `8·blk..`) lane form.
+    #[inline]
+    pub(crate) fn block(&self, blk: usize) -> Rq8 {
+        match self.first.get(blk) {
+            Some(r) => *r,
+            None => Rq8::new(&self.all[8 * blk..(8 * blk + 8).min(self.all.len())]),
+        }
+    }
+}
+
+/// The up to 8 values `v[k0..]` of a block of channels, the missing ones 0 (biases).
+#[inline]
+pub(crate) fn block8(v: &[i32], k0: usize) -> [i32; 8] {
+    let mut b = [0i32; 8];
+    let nb = (v.len() - k0).min(8);
+    b[..nb].copy_from_slice(&v[k0..k0 + nb]);
+    b
+}
+
 impl Rq8Regs {
     /// `clamp(zp + apply(acc), lo, hi)` of the 8 lanes `acc[0] ++ acc[1]`, as `i8`.
     #[target_feature(enable = "neon")]

@@ -14,12 +14,12 @@
 //! registers ([`super::lanes::Rq8Regs`]).
 //!
 //! **Stack:** the 8 KiB stage and the lane-form requantisers of up to 256 output channels
-//! (4 KiB; wider layers make the others per tile).
+//! ([`super::lanes::Rq8Table`], 4 KiB; wider layers make the others per tile).
 
 use super::mem::{ld1_s16, ld1q_s32};
 use core::arch::aarch64::*;
 
-use super::lanes::{store8, Rq8};
+use super::lanes::{block8, store8, Rq8Table};
 use crate::nn::conv::{ConvQuant, PW_BLOCK, PW_GROUP};
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::Shape;
@@ -29,8 +29,6 @@ pub(super) const TILE: usize = 8;
 /// `i16`s of the stage (8 KiB): [`TILE`] rows of up to 512 inputs, fewer rows of wider ones;
 /// rows wider than this take the portable kernel.
 const STAGE: usize = 4096;
-/// Blocks of 8 output channels whose requantisers are made once per call.
-pub(super) const BLOCKS: usize = 32;
 
 /// The NEON GEMM on operands [`crate::nn::conv::pointwise_fast`] has checked; `false` (nothing
 /// written) when a row is wider than [`STAGE`] or the vector requantisation does not hold.
@@ -67,11 +65,7 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let out = &mut out[..p * n];
     let tp = tile_rows(STAGE / kp);
     let mut st = [0i16; STAGE];
-    // the requantisers of up to 256 output channels in lane form, made once (4 KiB)
-    let mut rqs = [Rq8::ZERO; BLOCKS];
-    for (r, qq) in rqs.iter_mut().zip(q.requant.chunks(PW_BLOCK)) {
-        *r = Rq8::new(qq);
-    }
+    let rqs = Rq8Table::new(q.requant);
     for (xt, ot) in x.chunks(tp * k).zip(out.chunks_mut(tp * n)) {
         let np = xt.len() / k;
         for (row, xr) in st.chunks_exact_mut(kp).zip(xt.chunks_exact(k)) {
@@ -85,8 +79,7 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
         for (blk, wp) in w.chunks_exact(panel).enumerate() {
             let k0 = blk * PW_BLOCK;
             let nb = (n - k0).min(PW_BLOCK);
-            let mut bias = [0i32; PW_BLOCK];
-            bias[..nb].copy_from_slice(&b[k0..k0 + nb]);
+            let bias = block8(b, k0);
             // a short last tile takes the next size up within the tile: the extra rows hold
             // an earlier tile's pixels (or zeros), whose sums are not stored
             let acc = match np {
@@ -96,11 +89,7 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
                 _ => pad(tile::<1>(st, kp, wp, &bias)),
             };
             // the requantisers' registers only after the tile, which needs all but a few
-            let rq = match rqs.get(blk) {
-                Some(r) => *r,
-                None => Rq8::new(&q.requant[k0..k0 + nb]),
-            }
-            .regs(q.output_zero_point, lo, hi);
+            let rq = rqs.block(blk).regs(q.output_zero_point, lo, hi);
             for (i, a) in acc.iter().take(np).enumerate() {
                 store8(&mut ot[i * n + k0..i * n + k0 + nb], rq.requant(*a));
             }
