@@ -273,6 +273,20 @@ mod tests {
         Some(ResizeCase::new(rng, xs, size, false, true))
     });
 
+    kernel_equivalence!(resize_at_the_arm64_chunk_is_bit_equal, 0x61, 5, |rng, i| {
+        // `arm64::resize` stages at most 512 values and 64 pixels of an output row: one pixel
+        // of 512 channels a chunk, more channels (portable), many 64-pixel chunks of one
+        // channel, and a pixel count that leaves a short last chunk
+        let (xs, size) = match i {
+            0 => (Shape::new(512, 2, 3), (3, 5)),
+            1 => (Shape::new(513, 1, 2), (2, 3)),
+            2 => (Shape::new(1, 2, 3), (3, 700)),
+            3 => (Shape::new(11, 3, 5), (24, 130)),
+            _ => (Shape::new(100, 3, 4), (7, 11)),
+        };
+        Some(ResizeCase::new(rng, xs, size, i % 2 == 0, true))
+    });
+
     #[test]
     fn resize_bad_operands_are_errors() {
         let q = ResizeQuant::new(0.1, 0, 0.1, 0);

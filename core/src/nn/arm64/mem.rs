@@ -73,23 +73,38 @@ ld1!(
     ld1q_s32, vld1q_s32, i32, int32x4_t, "4s"
 );
 
-/// Stores 8 bytes (`vst1_s8`).
-#[target_feature(enable = "neon")]
-#[inline]
-pub(crate) unsafe fn st1_s8(p: *mut i8, v: int8x8_t) {
-    // SAFETY: the caller's: 8 writable bytes at `p`.
-    #[cfg(any(target_os = "none", semloc_ld1))]
-    unsafe {
-        asm!(
-            "st1 {{{v:v}.8b}}, [{p}]",
-            v = in(vreg) v,
-            p = in(reg) p,
-            options(nostack, preserves_flags),
-        );
-    }
-    // SAFETY: the caller's, as above.
-    #[cfg(not(any(target_os = "none", semloc_ld1)))]
-    unsafe {
-        vst1_s8(p, v)
-    }
+/// Defines an `st1` store of one vector register.
+macro_rules! st1 {
+    ($(#[$doc:meta])* $name:ident, $intrinsic:ident, $elem:ty, $vec:ty, $arr:literal) => {
+        $(#[$doc])*
+        #[target_feature(enable = "neon")]
+        #[inline]
+        pub(crate) unsafe fn $name(p: *mut $elem, v: $vec) {
+            // SAFETY: the caller's: the vector's bytes at `p` are writable; `p` is aligned to
+            // its element (a pointer to that type).
+            #[cfg(any(target_os = "none", semloc_ld1))]
+            unsafe {
+                asm!(
+                    concat!("st1 {{{v:v}.", $arr, "}}, [{p}]"),
+                    v = in(vreg) v,
+                    p = in(reg) p,
+                    options(nostack, preserves_flags),
+                );
+            }
+            // SAFETY: the caller's, as above.
+            #[cfg(not(any(target_os = "none", semloc_ld1)))]
+            unsafe {
+                $intrinsic(p, v)
+            }
+        }
+    };
 }
+
+st1!(
+    /// Stores 8 bytes (`vst1_s8`).
+    st1_s8, vst1_s8, i8, int8x8_t, "8b"
+);
+st1!(
+    /// Stores 4 `i32`s (`vst1q_s32`).
+    st1q_s32, vst1q_s32, i32, int32x4_t, "4s"
+);
