@@ -82,6 +82,25 @@ grep -q '^@ kernels: [0-9]* 1x1 (NEON)' "$WORK/qemu-cortex-a72.txt" || {
   echo "FAIL: the Cortex-A72 run did not report the NEON 1x1 GEMM"; fail=1; }
 grep -q '^@ kernels: [0-9]* 1x1 (sdot)' "$WORK/qemu-cortex-a76.txt" || {
   echo "FAIL: the Cortex-A76 run did not report the sdot 1x1 GEMM"; fail=1; }
+# the frame stack the ECU simulation reports (`FRAME_STACK_*_BYTES` in firmware-sim/src/sim/mod.rs)
+# must cover what the image measures, or its reports would understate the stack an ECU needs
+stack_const() {
+  sed -n "s/^pub const FRAME_STACK_$1_BYTES: usize = \([0-9_]*\);/\1/p" firmware-sim/src/sim/mod.rs | tr -d _
+}
+for pass in geometric semantic; do
+  budget=$(stack_const "${pass^^}")
+  for cpu in "${CPUS[@]}"; do
+    peak=$(sed -n "s/^@ $pass pass .*frame stack peak \([0-9]*\) bytes.*/\1/p" "$WORK/qemu-$cpu.txt")
+    if [ -z "$budget" ] || [ -z "$peak" ]; then
+      echo "FAIL: no $pass frame stack figure (constant '${budget}', $cpu peak '${peak}')"; fail=1
+    elif [ "$peak" -gt "$budget" ]; then
+      echo "FAIL: the $pass pass used $peak bytes of stack on the $cpu, more than" \
+        "FRAME_STACK_${pass^^}_BYTES ($budget) in firmware-sim/src/sim/mod.rs"; fail=1
+    else
+      echo "$pass frame stack on the $cpu: $peak of $budget bytes"
+    fi
+  done
+done
 poses=$(grep -c -E '^([0-9a-f]{16} ){11}[0-9a-f]{16}$' "$WORK/host.cmp" || true)
 if [ "$poses" -lt 2 ] || ! grep -q '^fnv1a64 [0-9a-f]\{16\}$' "$WORK/host.cmp"; then
   echo "FAIL: host output has $poses pose lines or no hash line"; fail=1

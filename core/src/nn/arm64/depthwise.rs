@@ -17,7 +17,7 @@
 use super::mem::{ld1_s8, ld1q_s32};
 use core::arch::aarch64::*;
 
-use super::lanes::{block8, load8, store8, Rq8Table};
+use super::lanes::{block8, load8, store8, Rq8, Rq8Table, TABLE};
 use crate::nn::conv::ConvQuant;
 use crate::nn::portable::conv::tap_range;
 use crate::nn::quant::{clamp_range, fits_simd_requant};
@@ -64,7 +64,8 @@ fn run(
     let x = &x[..xs.len()];
     let w = &w[..9 * c];
     let row = xs.w * c;
-    let rqs = Rq8Table::new(q.requant);
+    let mut table = [Rq8::ZERO; TABLE];
+    let rqs = Rq8Table::new(&mut table, q.requant);
     for (oy, orow) in out[..os.len()].chunks_exact_mut(os.w * c).enumerate() {
         let (ky0, ky1) = tap_range(oy, stride, 1, 3, xs.h);
         for g in 0..c.div_ceil(8) {

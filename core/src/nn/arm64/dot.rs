@@ -30,7 +30,7 @@ use super::mem::{ld1q_s32, ld1q_s8};
 use core::arch::aarch64::*;
 use core::arch::asm;
 
-use super::lanes::{block8, store8, Rq8Table, TABLE};
+use super::lanes::{block8, store8, Rq8, Rq8Table, TABLE};
 use super::pointwise::{pad, tile_rows};
 use crate::nn::conv::{ConvQuant, PW_BLOCK, PW_GROUP};
 use crate::nn::quant::{clamp_range, fits_simd_requant};
@@ -130,7 +130,8 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let out = &mut out[..p * n];
     let tp = tile_rows(STAGE / kp);
     let mut st = [0i8; STAGE];
-    let rqs = Rq8Table::new(q.requant);
+    let mut table = [Rq8::ZERO; TABLE];
+    let rqs = Rq8Table::new(&mut table, q.requant);
     // the blocks' starting sums, made once for up to TABLE blocks (1 KiB)
     let z = vdupq_n_s32(0);
     let mut sums = [[z; 2]; TABLE];

@@ -99,16 +99,20 @@ impl Rq8 {
 pub(crate) const TABLE: usize = 32;
 
 /// The lane-form requantisers of a layer's blocks of 8 channels: the first [`TABLE`] made once
-/// per call, those beyond (wider layers) when asked for.
+/// per call into the caller's array, those beyond (wider layers) when asked for.
+///
+/// The array is the caller's (a local of the kernel's frame) rather than a field: a 4 KiB
+/// table built in [`Rq8Table::new`] and moved into its return value left two copies in each
+/// GEMM's frame, and the bare-metal image's semantic frame stack peak rose from 18.9 to
+/// 22.1 KB.
 pub(crate) struct Rq8Table<'a> {
-    first: [Rq8; TABLE],
+    first: &'a [Rq8; TABLE],
     all: &'a [Requant],
 }
 
 impl<'a> Rq8Table<'a> {
-    /// The table of `all` (one requantiser per channel).
-    pub(crate) fn new(all: &'a [Requant]) -> Self {
-        let mut first = [Rq8::ZERO; TABLE];
+    /// The table of `all` (one requantiser per channel), its first blocks made into `first`.
+    pub(crate) fn new(first: &'a mut [Rq8; TABLE], all: &'a [Requant]) -> Self {
         for (r, qq) in first.iter_mut().zip(all.chunks(8)) {
             *r = Rq8::new(qq);
         }

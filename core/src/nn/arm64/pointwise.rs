@@ -19,7 +19,7 @@
 use super::mem::{ld1_s16, ld1q_s32};
 use core::arch::aarch64::*;
 
-use super::lanes::{block8, store8, Rq8Table};
+use super::lanes::{block8, store8, Rq8, Rq8Table, TABLE};
 use crate::nn::conv::{ConvQuant, PW_BLOCK, PW_GROUP};
 use crate::nn::quant::{clamp_range, fits_simd_requant};
 use crate::nn::Shape;
@@ -65,7 +65,8 @@ fn run(x: &[i8], xs: Shape, w: &[i8], b: &[i32], q: &ConvQuant<'_>, out: &mut [i
     let out = &mut out[..p * n];
     let tp = tile_rows(STAGE / kp);
     let mut st = [0i16; STAGE];
-    let rqs = Rq8Table::new(q.requant);
+    let mut table = [Rq8::ZERO; TABLE];
+    let rqs = Rq8Table::new(&mut table, q.requant);
     for (xt, ot) in x.chunks(tp * k).zip(out.chunks_mut(tp * n)) {
         let np = xt.len() / k;
         for (row, xr) in st.chunks_exact_mut(kp).zip(xt.chunks_exact(k)) {
