@@ -735,6 +735,22 @@ mod tests {
         Some(PwCase::new(rng, xs, c_out, 20_000, false))
     });
 
+    kernel_equivalence!(depthwise_extreme_operands_are_bit_equal, 0xd7, 40, |rng, i| {
+        // inputs at −128 / 127 and weights at ±127 (even cases; the largest pairs of products
+        // `arm64::depthwise` adds in `i16`) or with −128 among them (odd cases: its `i32` path)
+        let xs = Shape::new(rng.usize(8, 40), rng.usize(3, 9), rng.usize(3, 9));
+        let stride = rng.usize(1, 2);
+        let mut case = DwCase::new(rng, xs, stride, 5000, false);
+        for v in &mut case.x {
+            *v = if rng.usize(0, 3) == 0 { 127 } else { -128 };
+        }
+        let choices: &[i8] = if i % 2 == 0 { &[-127, 127] } else { &[-128, -127, 127] };
+        for v in &mut case.w {
+            *v = choices[rng.usize(0, choices.len() - 1)];
+        }
+        Some(case)
+    });
+
     kernel_equivalence!(depthwise_wide_layers_are_bit_equal, 0xd6, 12, |rng, _| {
         // more than 256 channels: several passes of the x86 kernel's group constants, and the
         // portable kernel's scalar requantisation (its lane-form table holds 256 channels)

@@ -7,7 +7,7 @@
 //! |-------------|-----------------------------------------------|-------------------------------|---------|
 //! | `pointwise` | `Conv` 1×1 (int8 GEMM over packed weights)    | `ld4`, `sxtl`, `smlal` (lane) | 12 KiB  |
 //! | `dot`       | `Conv` 1×1, on CPUs with FEAT_DotProd         | `sdot` (lane)                 | 13 KiB  |
-//! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2       | `ssubl`, `sxtl`, `smlal`      | 4 KiB   |
+//! | `depthwise` | `Conv` depthwise 3×3, pad 1, stride 1/2       | `smull`, `smlal`, `saddw`     | 4 KiB   |
 //! | `conv1`     | `Conv` 3×3 of a one-channel map (first layer) | `smlal` (lane)                | 2.2 KiB |
 //! | `resize`    | `Resize` bilinear, `half_pixel`               | `ssubl`, `smlal`, `mla`       | 4.8 KiB |
 //! | `eltwise`   | `Add`                                         | `sshll`, `sqrdmulh`           | —       |
