@@ -768,6 +768,16 @@ mod tests {
         ConvCase::new(rng, xs, p, 20_000, true)
     });
 
+    kernel_equivalence!(first_conv_wide_rows_are_bit_equal, 0xc2, 8, |rng, i| {
+        // output rows wider than `arm64::conv1`'s 64-pixel chunk (several chunks and a short
+        // last one), stride 1 and 2, up to 64 channels
+        let xs = Shape::new(1, rng.usize(2, 6), rng.usize(65, 200));
+        let s = 1 + i % 2;
+        let p =
+            Conv2dParams { c_out: rng.usize(1, 64), kernel: (3, 3), stride: (s, s), pads: [1; 4] };
+        ConvCase::new(rng, xs, p, 20_000, true)
+    });
+
     kernel_equivalence!(pointwise_wide_layers_are_bit_equal, 0x13, 12, |rng, i| {
         // more than 256 output channels (several passes of the AVX2 kernel's 32 blocks), or
         // rows wider than every staged tile (the unstaged x86 paths, the portable wide path)

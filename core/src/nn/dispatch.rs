@@ -26,6 +26,12 @@
 //! for NEON (part of the target), one for the dot products: `arm64::set_neon` turns the NEON
 //! kernels off process-wide, `arm64::set_dotprod` the `sdot` GEMM, and [`for_each_level`] runs
 //! `dotprod` (where the CPU has it), `neon`, then `portable`. **Memory:** none of its own.
+//!
+//! **Stack:** a dispatcher's frame stays small: the portable kernels with KiBs of staged rows
+//! (`pointwise`, `depthwise3x3`, `conv2d`) are `#[inline(never)]`, so their frames never add to
+//! the SIMD kernel's the dispatcher tries first. When LLVM once inlined the portable 1×1 GEMM here
+//! (a change to another kernel tipped it), the bare-metal image's semantic frame stack rose from
+//! 19.0 to 30.7 KB; `firmware-sim/qemu-check.sh` fails on such a rise.
 
 #[cfg(all(test, any(target_arch = "x86_64", target_arch = "aarch64")))]
 use core::cell::Cell;

@@ -4,19 +4,21 @@
 //! `[c_out][3][3]`: `out[oy][ox][c] = clamp(zo + requant[c](bias[c] + Σ_taps (x − zp)·w[c][t]))`
 //! — the integers of [`crate::nn::conv::conv2d_reference`] for that geometry.
 //!
-//! Per output pixel the 9 taps' `x − zp` are gathered into one `i16` vector and a lane (a
-//! tap outside the map reads 0, which is the reference's skipping it); per group of 8 output
-//! channels 9 `smlal` pairs by lane add them to sums that start at the biases, against the
-//! weights widened once per call into a tap-major `i16` table. The portable kernel's channel
-//! loop did the same through memory: 43 M guest instructions a frame under `qemu-aarch64`.
+//! Per chunk of up to 64 pixels of an output row the 9 taps' `x − zp` of each pixel are staged
+//! as one `i16` vector and a lane (a tap outside the map reads 0, which is the reference's
+//! skipping it). Then per group of 8 output channels, out of line with the group's weights
+//! (widened once per call into a tap-major `i16` table) and requantiser in registers, each
+//! pixel's 9 `smlal` pairs by lane add them to sums that start at the biases. Before, the
+//! groups ran inside the pixel loop and reloaded their weights and requantiser per pixel
+//! (13.5 M guest instructions a frame; the portable kernel's channel loop: 43 M).
 //!
-//! **Stack:** the widened weights and lane-form requantisers of up to 64 output channels
-//! (1.2 + 1 KiB; more channels: the portable kernel).
+//! **Stack:** the widened weights and lane-form requantisers of up to 64 output channels and a
+//! chunk's staged taps (1.2 + 1 + 1.1 KiB; more channels: the portable kernel).
 
 use super::mem::{ld1q_s16, ld1q_s32};
 use core::arch::aarch64::*;
 
-use super::lanes::{store8, Rq8};
+use super::lanes::{store8, Rq8, Rq8Regs};
 use crate::nn::conv::{Conv2dParams, ConvQuant};
 use crate::nn::portable::conv::tap_range;
 use crate::nn::quant::{clamp_range, fits_simd_requant};
@@ -24,6 +26,8 @@ use crate::nn::Shape;
 
 /// Most output channels (8 groups of 8).
 const GROUPS: usize = 8;
+/// Pixels of a row whose taps are staged at once (1.1 KiB).
+const CHUNK: usize = 64;
 
 /// The general conv on operands [`crate::nn::conv::conv2d_fast`] has checked (`os` the output
 /// shape), when it is a 3×3 conv of a one-channel map into at most 64 channels; `false`
@@ -82,61 +86,97 @@ fn run(
     }
     bias[..co].copy_from_slice(&b[..co]);
     let x = &x[..xs.len()];
+    // the taps of a chunk of a row's pixels: taps 0-7 as one vector, tap 8 apart
+    let mut t8 = [[0i16; 8]; CHUNK];
+    let mut t9 = [0i16; CHUNK];
     for (oy, orow) in out[..os.len()].chunks_exact_mut(os.w * co).enumerate() {
         let (ky0, ky1) = tap_range(oy, p.stride.0, p.pads[0], 3, xs.h);
-        for (ox, opix) in orow.chunks_exact_mut(co).enumerate() {
-            let (kx0, kx1) = tap_range(ox, p.stride.1, p.pads[1], 3, xs.w);
-            // the 9 taps' x − zp (0 outside the map), tap t = 3·ky + kx
-            let mut taps = [0i16; 9];
-            if ky1 - ky0 == 3 && kx1 - kx0 == 3 {
-                // interior: three 3-byte row slices, constant indices
-                let base = (oy * p.stride.0 - p.pads[0]) * xs.w + ox * p.stride.1 - p.pads[1];
-                for (ky, tr) in taps.chunks_exact_mut(3).enumerate() {
-                    let r = &x[base + ky * xs.w..base + ky * xs.w + 3];
-                    tr[0] = r[0] as i16 - zp;
-                    tr[1] = r[1] as i16 - zp;
-                    tr[2] = r[2] as i16 - zp;
-                }
-            } else {
-                for ky in ky0..ky1 {
-                    let iy = oy * p.stride.0 + ky - p.pads[0];
-                    let ix0 = ox * p.stride.1 + kx0 - p.pads[1];
-                    let row = &x[iy * xs.w + ix0..iy * xs.w + ix0 + (kx1 - kx0)];
-                    for (t, &v) in taps[3 * ky + kx0..3 * ky + kx1].iter_mut().zip(row) {
-                        *t = v as i16 - zp;
+        let mut p0 = 0;
+        while p0 < os.w {
+            let np = (os.w - p0).min(CHUNK);
+            for (i, (v8, v9)) in t8.iter_mut().zip(t9.iter_mut()).take(np).enumerate() {
+                let ox = p0 + i;
+                let (kx0, kx1) = tap_range(ox, p.stride.1, p.pads[1], 3, xs.w);
+                // the 9 taps' x − zp (0 outside the map), tap t = 3·ky + kx
+                let mut taps = [0i16; 9];
+                if ky1 - ky0 == 3 && kx1 - kx0 == 3 {
+                    // interior: three 3-byte row slices, constant indices
+                    let base = (oy * p.stride.0 - p.pads[0]) * xs.w + ox * p.stride.1 - p.pads[1];
+                    for (ky, tr) in taps.chunks_exact_mut(3).enumerate() {
+                        let r = &x[base + ky * xs.w..base + ky * xs.w + 3];
+                        tr[0] = r[0] as i16 - zp;
+                        tr[1] = r[1] as i16 - zp;
+                        tr[2] = r[2] as i16 - zp;
+                    }
+                } else {
+                    for ky in ky0..ky1 {
+                        let iy = oy * p.stride.0 + ky - p.pads[0];
+                        let ix0 = ox * p.stride.1 + kx0 - p.pads[1];
+                        let row = &x[iy * xs.w + ix0..iy * xs.w + ix0 + (kx1 - kx0)];
+                        for (t, &v) in taps[3 * ky + kx0..3 * ky + kx1].iter_mut().zip(row) {
+                            *t = v as i16 - zp;
+                        }
                     }
                 }
+                v8.copy_from_slice(&taps[..8]);
+                *v9 = taps[8];
             }
-            // SAFETY: 8 `i16`s of `taps`.
-            let t8 = unsafe { ld1q_s16(taps.as_ptr()) };
-            let t9 = vdup_n_s16(taps[8]);
-            for (g, (o, r)) in opix.chunks_mut(8).zip(&rqs).enumerate().take(groups) {
+            let chunk = &mut orow[p0 * co..(p0 + np) * co];
+            for (g, r) in rqs.iter().enumerate().take(groups) {
                 let c0 = 8 * g;
                 // SAFETY: 8 `i32`s of `bias`, 8 `i16`s of each `wt[t]` (c0 + 8 ≤ 64).
-                let (mut a, wv) = unsafe {
-                    let a = [ld1q_s32(bias.as_ptr().add(c0)), ld1q_s32(bias.as_ptr().add(c0 + 4))];
+                let (b, wv) = unsafe {
+                    let b = [ld1q_s32(bias.as_ptr().add(c0)), ld1q_s32(bias.as_ptr().add(c0 + 4))];
                     let wv: [int16x8_t; 9] =
                         core::array::from_fn(|t| ld1q_s16(wt[t].as_ptr().add(c0)));
-                    (a, wv)
+                    (b, wv)
                 };
-                macro_rules! tap {
-                    ($t:literal) => {
-                        a[0] = vmlal_laneq_s16::<$t>(a[0], vget_low_s16(wv[$t]), t8);
-                        a[1] = vmlal_high_laneq_s16::<$t>(a[1], wv[$t], t8);
-                    };
-                }
-                tap!(0);
-                tap!(1);
-                tap!(2);
-                tap!(3);
-                tap!(4);
-                tap!(5);
-                tap!(6);
-                tap!(7);
-                a[0] = vmlal_lane_s16::<0>(a[0], vget_low_s16(wv[8]), t9);
-                a[1] = vmlal_high_lane_s16::<0>(a[1], wv[8], t9);
-                store8(o, r.regs(q.output_zero_point, lo, hi).requant(a));
+                let rq = r.regs(q.output_zero_point, lo, hi);
+                group_run(&t8[..np], &t9[..np], &wv, b, &rq, chunk, (co, c0));
             }
+            p0 += np;
         }
+    }
+}
+
+/// One group of 8 output channels (from channel `c0` of `co`) over a chunk of pixels (`t8`,
+/// `t9`: their taps' `x − zp`): the biases `b` plus 9 `smlal` pairs by lane against the weight
+/// vectors `wv`, requantised and stored (the group's channels only). Out of line, so that the
+/// weights and the requantiser stay in registers over the chunk.
+#[target_feature(enable = "neon")]
+#[inline(never)]
+fn group_run(
+    t8: &[[i16; 8]],
+    t9: &[i16],
+    wv: &[int16x8_t; 9],
+    b: [int32x4_t; 2],
+    rq: &Rq8Regs,
+    out: &mut [i8],
+    (co, c0): (usize, usize),
+) {
+    let (wv, rq) = (*wv, *rq);
+    let nb = (co - c0).min(8);
+    for ((v8, &v9), o) in t8.iter().zip(t9).zip(out.chunks_exact_mut(co)) {
+        // SAFETY: 8 `i16`s.
+        let tv = unsafe { ld1q_s16(v8.as_ptr()) };
+        let tl = vdup_n_s16(v9);
+        let mut a = b;
+        macro_rules! tap {
+            ($t:literal) => {
+                a[0] = vmlal_laneq_s16::<$t>(a[0], vget_low_s16(wv[$t]), tv);
+                a[1] = vmlal_high_laneq_s16::<$t>(a[1], wv[$t], tv);
+            };
+        }
+        tap!(0);
+        tap!(1);
+        tap!(2);
+        tap!(3);
+        tap!(4);
+        tap!(5);
+        tap!(6);
+        tap!(7);
+        a[0] = vmlal_lane_s16::<0>(a[0], vget_low_s16(wv[8]), tl);
+        a[1] = vmlal_high_lane_s16::<0>(a[1], wv[8], tl);
+        store8(&mut o[c0..c0 + nb], rq.requant(a));
     }
 }

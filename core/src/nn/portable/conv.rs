@@ -39,6 +39,9 @@ const TAPS_OUT: usize = 64;
 /// shape). A short reduction with few output channels (the network's first conv: 3×3 over
 /// one grey channel into 32) takes [`conv2d_taps`], anything else the dot-product loop.
 #[allow(clippy::too_many_arguments)]
+// Out of line: inlined into the dispatcher, its frame (KiBs of staged rows) would add to the
+// SIMD kernel's the dispatcher calls first (`nn::dispatch`, **Stack**).
+#[inline(never)]
 pub(crate) fn conv2d(
     x: &[i8],
     xs: Shape,

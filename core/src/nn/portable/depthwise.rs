@@ -23,6 +23,9 @@ const DW_LANE_GROUPS: usize = 32;
 /// The depthwise 3×3 conv on operands [`crate::nn::conv::depthwise3x3_fast`] has checked (`os`
 /// the output shape).
 #[allow(clippy::too_many_arguments)]
+// Out of line: inlined into the dispatcher, its frame (KiBs of staged rows) would add to the
+// SIMD kernel's the dispatcher calls first (`nn::dispatch`, **Stack**).
+#[inline(never)]
 pub(crate) fn depthwise3x3(
     x: &[i8],
     xs: Shape,

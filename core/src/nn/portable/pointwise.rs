@@ -23,6 +23,9 @@ pub(crate) const PW_STAGE: usize = 1024;
 /// four weight rows at a time in one zipped loop (the shape of loop the auto-vectoriser turns
 /// into `pmaddwd` / `smlal`), then the block is requantised 8 lanes at a time ([`Lanes8`],
 /// branch-free). Rows wider than 1024 take [`pointwise_wide`].
+// Out of line: inlined into the dispatcher, its frame (KiBs of staged rows) would add to the
+// SIMD kernel's the dispatcher calls first (`nn::dispatch`, **Stack**).
+#[inline(never)]
 pub(crate) fn pointwise(
     x: &[i8],
     xs: Shape,
