@@ -77,7 +77,7 @@ fn run(
     let row = xs.w * c;
     let mut table = [Rq8::ZERO; TABLE];
     let rqs = Rq8Table::new(&mut table, q.requant);
-    // interior windows add two taps' products in `i16`, exact unless a weight is −128
+    // the runs add two taps' products in `i16`, exact unless a weight is −128
     let pairs = !w.contains(&i8::MIN);
     // output columns whose windows are inside the input in x: `ox·stride ≥ 1` and
     // `ox·stride + 1 ≤ xs.w − 1`
