@@ -97,7 +97,7 @@ fn run(
                 *v = load8(&w[t * c + c0..t * c + c0 + nb], 0);
             }
             let wv = w8.map(|v| vmovl_s8(v));
-            // the interior's sums start at `b − zp·Σw` (`Σ (x − zp)·w = Σ x·w − zp·Σw`)
+            // the runs' sums start at `b − zp·Σw` (`Σ (x − zp)·w = Σ x·w − zp·Σw`)
             let sw = wv.iter().fold(vdupq_n_s16(0), |a, &v| vaddq_s16(a, v));
             let bc = [
                 vmlsl_n_s16(b0[0], vget_low_s16(sw), zp.into()),
@@ -113,25 +113,22 @@ fn run(
             }
             // the interior run of this row: windows inside the input, a full group, products
             // in pairs (`pair_run`); the other pixels below
-            let (ra, rb) = if nb == 8 && pairs && xa < xb && ky0 < ky1 {
+            // the window rows inside the input: all 3, a top or bottom border row, or a one-row
+            // map (pad 1 leaves no other case)
+            let rows = matches!((ky0, ky1), (0, 3) | (1, 3) | (0, 2) | (1, 2));
+            let (ra, rb) = if nb == 8 && pairs && xa < xb && rows {
                 // from the window's first row inside the input (`ky0`)
                 let base = ((oy * stride + ky0 - 1) * xs.w + xa * stride - 1) * c + c0;
                 let g = PairRun { row, c, step: stride * c, n: xb - xa, zp };
                 let (xr, or) = (&x[base..], &mut orow[xa * c + c0..]);
-                // the window rows inside the input as constants (no per-tap test in the run);
-                // one row inside is not met with pad 1 and maps of 2 rows or more
-                let ran = match (ky0, ky1) {
+                // the rows as constants: no per-tap test in the run
+                match (ky0, ky1) {
                     (0, 3) => pair_run::<0, 3>(xr, g, &w8, bc, &rq, or),
                     (1, 3) => pair_run::<1, 3>(xr, g, &w8, bc, &rq, or),
                     (0, 2) => pair_run::<0, 2>(xr, g, &w8, bc, &rq, or),
-                    (1, 2) => pair_run::<1, 2>(xr, g, &w8, bc, &rq, or),
-                    _ => false,
-                };
-                if ran {
-                    (xa, xb)
-                } else {
-                    (0, 0)
+                    _ => pair_run::<1, 2>(xr, g, &w8, bc, &rq, or),
                 }
+                (xa, xb)
             } else {
                 (0, 0)
             };
@@ -187,13 +184,12 @@ struct PairRun {
 }
 
 /// `n` outputs of one group of 8 channels whose windows are inside the input in x and in rows
-/// `KY0..KY1`: per window `requant(bc + Σ x·w)` ([`pair_window`]), the sums starting at
+/// `KY0..KY1`: per window `requant(bc + Σ x·w)`, the sums starting at
 /// `bc = b − zp·Σw` (`Σ (x − zp)·w = Σ x·w − zp·Σw`). The taps of the other rows (a top or
 /// bottom border row) read as the zero point, which adds `(zp − zp)·w = 0`, as the reference
 /// leaves them out. `x` starts at the first window's top-left byte of the group in row `KY0`,
 /// `out` at the first output's. Out of line, so that the weights and the requantiser stay in
-/// registers over the run. `true` (it always runs: the value tells the caller's `match` arms
-/// apart from its fallback).
+/// registers over the run.
 #[target_feature(enable = "neon")]
 #[inline(never)]
 fn pair_run<const KY0: usize, const KY1: usize>(
@@ -203,11 +199,11 @@ fn pair_run<const KY0: usize, const KY1: usize>(
     bc: [int32x4_t; 2],
     rq: &Rq8Regs,
     out: &mut [i8],
-) -> bool {
+) {
     const { assert!(KY0 < KY1 && KY1 <= 3) };
     let PairRun { row, c, step, n, zp } = g;
     if n == 0 {
-        return true;
+        return;
     }
     // every window's loads (the last one's end is the furthest) and every 8-byte store inside
     assert!(
@@ -231,27 +227,15 @@ fn pair_run<const KY0: usize, const KY1: usize>(
                 zp8
             }
         };
-        let a = pair_window(ld, &w8, bc);
+        // two taps' products in `i16` (no weight is −128), widened into the sums
+        let mut a = bc;
+        for t in [0, 2, 4, 6] {
+            let s = vmlal_s8(vmull_s8(ld(t), w8[t]), ld(t + 1), w8[t + 1]);
+            a = [vaddw_s16(a[0], vget_low_s16(s)), vaddw_high_s16(a[1], s)];
+        }
+        let s = vmull_s8(ld(8), w8[8]);
+        a = [vaddw_s16(a[0], vget_low_s16(s)), vaddw_high_s16(a[1], s)];
         // SAFETY: `i·c + 8 ≤ (n − 1)·c + 8 ≤ out.len()` (asserted).
         unsafe { st1_s8(out.as_mut_ptr().add(i * c), rq.requant(a)) };
     }
-    true
-}
-
-/// `bc + Σ_t x_t·w_t` over a window's 9 taps (`ld(t)`: tap `t`'s 8 bytes), the products added
-/// two at a time in `i16` (no weight is −128) and widened into the sums.
-#[target_feature(enable = "neon")]
-#[inline]
-fn pair_window(
-    ld: impl Fn(usize) -> int8x8_t,
-    w8: &[int8x8_t; 9],
-    bc: [int32x4_t; 2],
-) -> [int32x4_t; 2] {
-    let mut a = bc;
-    for t in [0, 2, 4, 6] {
-        let s = vmlal_s8(vmull_s8(ld(t), w8[t]), ld(t + 1), w8[t + 1]);
-        a = [vaddw_s16(a[0], vget_low_s16(s)), vaddw_high_s16(a[1], s)];
-    }
-    let s = vmull_s8(ld(8), w8[8]);
-    [vaddw_s16(a[0], vget_low_s16(s)), vaddw_high_s16(a[1], s)]
 }
